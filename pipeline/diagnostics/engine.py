@@ -1,0 +1,324 @@
+"""Find → extend → refit → measure, repeated while causes remain.
+
+1. Fit the nominal model (output error). Residual tests on the estimation part.
+2. Every family proposes hypotheses. Each is tested by regressing the output-error residual on the
+   output sensitivity of its new coefficients, beyond the current parameters' sensitivities (the
+   output-error analogue of correlating the equation error with the candidate term; HAC Wald test,
+   :func:`stats.added_terms_test`). A family's p-value is its best hypothesis' p times the number of
+   its hypotheses (Bonferroni); the periodic family also needs Fisher's g. Families are then
+   controlled together with Holm at ``diagnose.alpha``.
+3. For every family that fires, its best hypothesis is added and the model refitted. It is accepted
+   only if the validation free-run RMSE falls with a 95 % block-bootstrap interval of the relative gain
+   above zero **and** BIC on the estimation part falls.
+4. The accepted extension with the lowest ΔBIC is the finding; the extended model becomes the model
+   and the loop repeats, up to ``max_findings`` causes.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import criteria
+from ..fit import FitResult, Problem, fit_output_error
+from ..model import Model
+from ..simulate import outputs, simulate_states
+from . import stats
+from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
+
+
+@dataclass
+class Candidate:
+    hyp: Hypothesis
+    wald: stats.WaldResult | None
+    p_family: float
+    evidence: list[dict]
+    fit: FitResult | None = None
+    gain: dict | None = None
+    delta_bic: float | None = None
+    accepted: bool = False
+    reason: str = ""
+    start: dict = field(default_factory=dict)
+
+
+@dataclass
+class Diagnosis:
+    nominal: FitResult
+    final: FitResult
+    findings: list[dict]
+    tests: list[stats.TestResult]
+    history: list[dict]          # every hypothesis tested, per iteration (for the report)
+    fits: list[FitResult]        # nominal, then each accepted extension
+
+
+def _log(msg: str) -> None:
+    print(f"[diagnose] {msg}", file=sys.stderr, flush=True)
+
+
+def val_resid(fit: FitResult, prob: Problem) -> np.ndarray:
+    sl = prob.split.val_slice()
+    return prob.Y[sl] - fit.Yhat[sl]
+
+
+def rmse(r: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(r))))
+
+
+def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
+    """MATLAB ``compare`` fit: 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (free-run simulation)."""
+    return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / np.linalg.norm(y - y.mean(axis=0))))
+
+
+def bic_of(fit: FitResult) -> float:
+    return criteria.bic(fit.resid_est, fit.n_params)
+
+
+def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
+    e = fit.resid_est[:, 0]
+    sl = prob.split.est_slice()
+    tests = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha)]
+    if prob.U.shape[1] and np.ptp(prob.U[sl, 0]) > 0:
+        tests.append(stats.input_crosscorr(e, prob.U[sl, 0], 25, alpha))
+    g, f_cyc = stats.fisher_g(e, alpha)
+    tests.append(g)
+    return tests, f_cyc
+
+
+def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator, n_boot: int) -> dict:
+    """Relative gain 1 − RMSE_after/RMSE_before on validation data, with a 95 % moving-block bootstrap
+    interval (Künsch 1989; block length ⌈√N⌉ keeps the residuals' autocorrelation inside blocks)."""
+    b2 = np.sum(before ** 2, axis=1)
+    a2 = np.sum(after ** 2, axis=1)
+    n = len(b2)
+    L = max(10, int(math.ceil(math.sqrt(n))))
+    nb = int(math.ceil(n / L))
+    starts = rng.integers(0, n - L + 1, size=(n_boot, nb))
+    idx = (starts[:, :, None] + np.arange(L)[None, None, :]).reshape(n_boot, -1)[:, :n]
+    rel = 1.0 - np.sqrt(a2[idx].sum(axis=1) / b2[idx].sum(axis=1))
+    rb, ra = rmse(before), rmse(after)
+    lo, hi = np.percentile(rel, [2.5, 97.5])
+    return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": 1.0 - ra / rb,
+            "ci95": [float(lo), float(hi)], "bootstrap": {"method": "moving block", "block": L, "n": n_boot}}
+
+
+class Diagnoser:
+    def __init__(self, prob: Problem, *, alpha: float, families: list[str], max_findings: int, seed: int,
+                 n_boot: int = 400, max_delay_s: float | None = None, dt: float = 1.0):
+        self.prob, self.alpha, self.families = prob, alpha, families
+        self.max_findings, self.seed, self.n_boot = max_findings, seed, n_boot
+        self.dt = dt
+        self.max_delay = max_delay_s if max_delay_s is not None else 20 * dt
+        self.w = prob.weights
+
+    # -- sensitivities -------------------------------------------------------------------------
+    def _sim_est(self, model: Model, x0: np.ndarray) -> np.ndarray | None:
+        stop = self.prob.split.est[1]
+        res = simulate_states(model, self.prob.t[:stop], self.prob.U[:stop], x0, bound=self.prob.bound)
+        if res.diverged_at is not None:
+            return None
+        Y = outputs(model, self.prob.t[:stop], self.prob.U[:stop], res.X, self.prob.out_names)
+        return Y[self.prob.split.est[0]:]
+
+    def _step(self, fit: FitResult, hyp: Hypothesis, coef: str) -> float:
+        term = next((t for t in hyp.terms if t.coef == coef), None)
+        if term is None:  # input delay
+            return 0.5 * self.dt
+        if term.kind == "out_const":
+            return 1e-3 * float(np.std(self.prob.Y[:, 0]) or 1.0)
+        m = fit.model
+        X = simulate_states(m, self.prob.t, self.prob.U, fit.x0, bound=self.prob.bound).X
+        i = m.states.index(term.target)
+        dscale = float(np.std(np.gradient(X[:, i], self.dt))) or 1.0
+        z = X[:, m.states.index(term.var)] if term.var else None
+        tscale = {"const": 1.0, "sin": 0.7, "cos": 0.7}.get(term.kind)
+        if tscale is None:
+            tv = {"pow": lambda: z ** term.power, "sign": lambda: np.sign(z),
+                  "absprod": lambda: z * np.abs(z)}[term.kind]()
+            tscale = float(np.std(tv)) or 1.0
+        return 1e-3 * dscale / tscale
+
+    def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
+        if hyp.family == "input_delay":
+            d = (values or {}).get("input_delay_s", 0.0)
+            return fit.model.extend([], {"input_delay_s": d}, delay="input_delay_s")
+        params = {c: 0.0 for c in hyp.coefs}
+        params.update(hyp.extra_params)
+        params.update(values or {})
+        return fit.model.extend(hyp.terms, params)
+
+    def test(self, fit: FitResult, hyp: Hypothesis) -> stats.WaldResult | None:
+        base = self._sim_est(self.hyp_model(fit, hyp), fit.x0)
+        if base is None:
+            return None
+        cols = []
+        for c in hyp.coefs:
+            h = self._step(fit, hyp, c)
+            Yh = self._sim_est(self.hyp_model(fit, hyp, {c: h}), fit.x0)
+            if Yh is None:
+                return None
+            cols.append((((Yh - base) * self.w).ravel()) / h)
+        S = np.column_stack(cols)
+        e = (fit.resid_est * self.w).ravel()
+        return stats.added_terms_test(e, fit.jac, S)
+
+    # -- refits ------------------------------------------------------------------------------------
+    def refit(self, fit: FitResult, cand: Candidate) -> FitResult | None:
+        hyp = cand.hyp
+        try:
+            if hyp.family == "input_delay":
+                return self._fit_delay(fit)
+            start = {c: float(b) for c, b in zip(hyp.coefs, cand.wald.beta)}
+            m = self.hyp_model(fit, hyp, start)
+            return fit_output_error(_with_initial(m, fit), self.prob)
+        except Exception as exc:  # a candidate that cannot be fitted is rejected, not fatal
+            cand.reason = f"refit failed: {exc}"
+            return None
+
+    def _fit_delay(self, fit: FitResult) -> FitResult:
+        """Profile search: SSE over integer delays with the current parameters, then refits at the best
+        integer delay and its neighbours, a parabola through the three SSEs, a final refit there."""
+        kmax = max(1, int(round(self.max_delay / self.dt)))
+        e_est = []
+        y = self.prob.Y[self.prob.split.est_slice()]
+        for k in range(kmax + 1):
+            m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
+            Yh = self._sim_est(m, fit.x0)
+            e_est.append(np.inf if Yh is None else float(np.sum(((y - Yh) * self.w) ** 2)))
+        k0 = int(np.argmin(e_est))
+        fits = {}
+        for k in (k0 - 1, k0, k0 + 1):
+            if k >= 0:
+                m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
+                fits[k] = fit_output_error(_with_initial(m, fit), self.prob)
+        if len(fits) == 3:
+            s = [fits[k].sse_w for k in (k0 - 1, k0, k0 + 1)]
+            den = s[0] - 2 * s[1] + s[2]
+            frac = float(np.clip(0.5 * (s[0] - s[2]) / den, -0.5, 0.5)) if den > 0 else 0.0
+            if abs(frac) > 0.05:
+                m = fit.model.extend([], {"input_delay_s": (k0 + frac) * self.dt}, delay="input_delay_s")
+                f2 = fit_output_error(_with_initial(m, fit), self.prob)
+                if f2.sse_w < fits[k0].sse_w:
+                    return f2
+        return fits[k0]
+
+    # -- one iteration -----------------------------------------------------------------------------
+    def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> list[Candidate]:
+        st = Structure.of(fit.model)
+        X = simulate_states(fit.model, self.prob.t, self.prob.U, fit.x0, bound=self.prob.bound).X
+        out = []
+        for fam in self.families:
+            if fam not in REGISTRY:
+                continue
+            hyps = REGISTRY[fam].hypotheses(fit.model, st, outputs=self.prob.out_names, freq_hz=f_hz,
+                                              X=X)
+            best: Candidate | None = None
+            for h in hyps:
+                wr = self.test(fit, h)
+                if wr is None:
+                    continue
+                ev = [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic, "p_value": wr.p_value,
+                       "dof": wr.dof}]
+                if best is None or wr.statistic / wr.dof > best.wald.statistic / best.wald.dof:
+                    best = Candidate(h, wr, 1.0, ev)
+            if best is None:
+                continue
+            best.p_family = min(1.0, best.wald.p_value * len(hyps))
+            if fam == "periodic_disturbance":
+                best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
+                                      "p_value": fisher.p_value})
+                best.p_family = max(best.p_family, fisher.p_value)
+            out.append(best)
+        return out
+
+    def run(self, model: Model, start: dict | None = None) -> Diagnosis:
+        prob = self.prob
+        _log(f"fitting the nominal model ({len(model.free)} free parameters, output error)")
+        nominal = fit_output_error(model, prob, start=start)
+        current = nominal
+        tests0, _ = residual_tests(nominal, prob, self.alpha)
+        findings, history, fits = [], [], [nominal]
+        for it in range(self.max_findings):
+            tests, f_cyc = residual_tests(current, prob, self.alpha)
+            fisher = next(t for t in tests if t.name == "fisher_g")
+            cands = self.candidates(current, f_cyc / self.dt, fisher)
+            fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
+            _log(f"iteration {it + 1}: {len(cands)} families tested, fired: "
+                 f"{[k for k, v in fired.items() if v] or 'none'}")
+            rng = np.random.default_rng([self.seed, it])
+            before = val_resid(current, prob)
+            bic0 = bic_of(current)
+            for c in cands:
+                if not fired[c.hyp.family]:
+                    c.reason = "not significant after Holm correction"
+                    continue
+                c.fit = self.refit(current, c)
+                if c.fit is None:
+                    continue
+                c.gain = gain_ci(before, val_resid(c.fit, prob), rng, self.n_boot)
+                c.delta_bic = bic_of(c.fit) - bic0
+                c.accepted = c.gain["ci95"][0] > 0 and c.delta_bic < 0
+                c.reason = "accepted" if c.accepted else (
+                    "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0
+                    else "BIC not lower")
+                _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
+                     f"{c.gain['ci95'][1]:+.3f}, dBIC {c.delta_bic:+.1f} -> {c.reason}")
+            history.append({"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]})
+            acc = [c for c in cands if c.accepted]
+            if not acc:
+                break
+            best = min(acc, key=lambda c: c.delta_bic)
+            findings.append(self.finding(best))
+            current = best.fit
+            fits.append(current)
+        return Diagnosis(nominal, current, findings, tests0, history, fits)
+
+    def finding(self, c: Candidate) -> dict:
+        h, fit = c.hyp, c.fit
+        val = dict(zip(fit.names, fit.theta))
+        sd = dict(zip(fit.names, fit.std))
+        f: dict = {"family": h.family}
+        g = c.gain
+        gtxt = (f"lowers the validation free-run RMSE from {g['before']:.4g} to {g['after']:.4g} "
+                f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
+                f"{100 * g['ci95'][1]:.1f} %) and BIC by {-c.delta_bic:.1f}")
+        if h.family == "input_delay":
+            d = float(fit.model.params["input_delay_s"])
+            f.update(delay_s=d, delay_samples=d / self.dt)
+            desc = f"The input acts with a dead time of {d:.4g} s ({d / self.dt:.2f} samples); delaying it {gtxt}."
+        elif h.family == "output_offset":
+            c0 = h.coefs[0]
+            f.update(output=h.output, value=val[c0], value_std=sd[c0], coefficient=val[c0])
+            desc = f"The measured output {h.output} carries a constant offset of {val[c0]:.4g}; removing it {gtxt}."
+        elif h.family == "periodic_disturbance":
+            a, b = val[h.coefs[0]], val[h.coefs[1]]
+            fname = next(iter(h.extra_params))
+            amp, ph = amplitude_phase(a, b)
+            fz = float(fit.model.params[fname])
+            f.update(equation=h.equation, frequency_hz=fz, frequency_std=sd.get(fname), amplitude=amp,
+                     phase_rad=ph, term=f"sin(2*pi*{fz:.6g}*t + {ph:.4g})", coefficient=amp)
+            desc = (f"A periodic disturbance of {fz:.4g} Hz and amplitude {amp:.4g} acts in the equation of "
+                    f"{h.equation}; adding it {gtxt}.")
+        else:
+            c0 = h.coefs[0]
+            f.update(equation=h.equation, term=h.term, coefficient=val[c0], coefficient_std=sd[c0])
+            what = {"offset": "A constant offset", "cubic_stiffness": f"A cubic stiffness term {h.term}",
+                    "coulomb_friction": f"Coulomb friction {h.term}",
+                    "quadratic_damping": f"Quadratic damping {h.term}"}.get(h.family, h.family)
+            desc = (f"{what} is missing from the equation of {h.equation}: adding {val[c0]:.4g}*{h.term} {gtxt}.")
+        f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic,
+                 extended_equations=fit.model.describe_equations())
+        return f
+
+
+def _with_initial(m: Model, fit: FitResult) -> Model:
+    """Keep estimated initial states as the refit's starting point."""
+    return m
+
+
+def _cand_record(c: Candidate) -> dict:
+    return {"family": c.hyp.family, "hypothesis": c.hyp.key, "p_family": c.p_family,
+            "statistic": None if c.wald is None else c.wald.statistic,
+            "gain": c.gain, "delta_bic": c.delta_bic, "accepted": c.accepted, "reason": c.reason}
