@@ -154,7 +154,7 @@ def load_record(lc: LoadedConfig) -> Record:
             raise DataError(f"non-uniform sampling: interval at row {i + 1} is {d[i]:.6g} s against a median "
                             f"of {dt:.6g} s ({100 * jitter:.2f} % off; data.max_jitter allows "
                             f"{100 * dc.max_jitter:.2f} %); resample the record first", file=f)
-        if jitter > 0:
+        if jitter > 1e-6:
             log.append(f"sampling jitter up to {100 * jitter:.3g} % accepted; median dt = {dt:.6g} s used")
     else:
         dt = float(dc.sample_time)

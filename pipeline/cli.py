@@ -1,0 +1,51 @@
+"""Command line: ``sysid report CONFIG [--out DIR]``, ``sysid diagnose CONFIG [--out DIR]``.
+
+Exit codes: 0 ok, 2 bad input (config, data, options: one message naming file and key), 1 internal
+error. ``--out`` is the run folder itself (default ``reports/<run-id>``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import traceback
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="sysid", description="What the simulation gets wrong, why, the fix "
+                                 "and its worth.")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for name, helptext in (("report", "run the pipeline and write the run folder with report.html"),
+                           ("diagnose", "run the pipeline and write the run folder without the HTML")):
+        p = sub.add_parser(name, help=helptext)
+        p.add_argument("config", help="YAML config (see configs/demo.yaml)")
+        p.add_argument("--out", help="run folder to write (default reports/<run-id>)")
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as exc:  # argparse: usage errors are bad input
+        return 2 if exc.code else 0
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    from .errors import InputError
+    try:
+        from .runs import run
+        path = run(args.config, args.out, html=args.cmd == "report")
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted; no run folder written", file=sys.stderr)
+        return 1
+    except Exception:
+        traceback.print_exc()
+        print("internal error: please report it with the traceback above", file=sys.stderr)
+        return 1
+    if args.cmd == "report":
+        print(f"report: {path / 'report.html'}")
+    else:
+        print(f"run folder: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,203 @@
+"""One run: config + record → diagnosis → run folder ``reports/<run-id>/``.
+
+The run id is ``<name>-<8 hex>`` from the hashes of the canonical config and the data file, not the
+clock, so a rerun reproduces it. Everything is written into a hidden temporary folder beside the
+target and renamed at the end: a crashed run never looks complete. ``summary.json`` (contract §3)
+holds no times or paths and its floats are rounded to 10 significant digits, so two runs of the same
+config on the same data are byte-identical.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from . import __version__
+from .config import FAMILIES_V1, LoadedConfig, load_config
+from .data import Record, Split, load_record, make_split, remove_means
+from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
+from .fit import FitResult, Problem, equation_error_start
+from .model import Model
+
+SCHEMA = "sysid-summary/1"
+
+
+@dataclass
+class RunContext:
+    lc: LoadedConfig
+    rec: Record
+    split: Split
+    model: Model
+    prob: Problem
+    diag: Diagnosis
+    run_id: str
+    summary: dict
+
+
+def _clean(x):
+    """JSON-ready copy: numpy → Python, floats rounded to 10 significant digits, NaN/inf → None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_clean(v) for v in x.tolist()]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        if not math.isfinite(v):
+            return None
+        return float(f"{v:.10g}")
+    return x
+
+
+def dumps(obj) -> str:
+    return json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n"
+
+
+def model_block(fit: FitResult, prob: Problem) -> dict:
+    sl = prob.split.val_slice()
+    r = val_resid(fit, prob)
+    return {"params": dict(zip(fit.names, fit.theta)), "param_std": dict(zip(fit.names, fit.std)),
+            "estimation": {"rmse_sim": rmse(fit.resid_est),
+                           "fit_percent": fit_percent(prob.Y[prob.split.est_slice()],
+                                                      fit.Yhat[prob.split.est_slice()])},
+            "validation": {"rmse_sim": rmse(r), "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl])},
+            "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success}
+
+
+def families_of(lc: LoadedConfig) -> list[str]:
+    fam = lc.cfg.diagnose.families
+    return list(FAMILIES_V1) if fam == "all" else [f for f in fam if f in FAMILIES_V1]
+
+
+def analyse(lc: LoadedConfig) -> RunContext:
+    rec = load_record(lc)
+    split = make_split(lc, rec.n)
+    if lc.cfg.data.remove_mean:
+        remove_means(rec, split)
+    model = Model.from_config(lc)
+    prob = Problem.from_record(rec, model, split)
+    d = lc.cfg.diagnose
+    dg = Diagnoser(prob, alpha=d.alpha, families=families_of(lc), max_findings=d.max_findings,
+                   seed=lc.cfg.seed, n_boot=d.bootstrap, max_delay_s=d.max_delay_s, dt=rec.dt)
+    diag = dg.run(model, start=equation_error_start(model, prob))
+    cfg_sha = lc.sha256()
+    run_id = f"{lc.cfg.name}-{hashlib.sha256((cfg_sha + rec.sha256).encode()).hexdigest()[:8]}"
+    summary = build_summary(lc, rec, prob, diag, run_id, cfg_sha)
+    return RunContext(lc, rec, split, model, prob, diag, run_id, summary)
+
+
+def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> dict:
+    nominal = model_block(diag.nominal, prob)
+    ignored = [f for f in (lc.cfg.diagnose.families if isinstance(lc.cfg.diagnose.families, list) else [])
+               if f not in FAMILIES_V1]
+    models = [{"name": "nominal", "estimator": "output_error_ls", "bic": nominal["bic"],
+               "n_params": nominal["n_params"], "validation_rmse_sim": nominal["validation"]["rmse_sim"],
+               "cv_rmse_sim": None}]
+    name = "nominal"
+    for f, fit in zip(diag.findings, diag.fits[1:]):
+        name = f"{name}+{f['family']}"
+        b = model_block(fit, prob)
+        models.append({"name": name, "estimator": "output_error_ls", "bic": b["bic"], "n_params": b["n_params"],
+                       "validation_rmse_sim": b["validation"]["rmse_sim"], "cv_rmse_sim": None,
+                       "equations": fit.model.describe_equations()})
+    return {
+        "schema": SCHEMA, "run_id": run_id, "config_sha256": cfg_sha, "data_sha256": rec.sha256,
+        "data": {"n_samples": rec.n, "sample_time": rec.dt, "estimation": list(prob.split.est),
+                 "validation": list(prob.split.val), "intersample": lc.cfg.data.intersample,
+                 "outputs": prob.out_names, "log": rec.log},
+        "nominal": nominal,
+        "final": model_block(diag.final, prob),
+        "diagnosis": {
+            "verdict": "discrepancy" if diag.findings else "no_significant_discrepancy",
+            "findings": diag.findings,
+            "tests": [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
+                       "passed": t.passed, "detail": t.detail, "on": "nominal model, estimation data"}
+                      for t in diag.tests],
+            "families_tested": families_of(lc), "families_not_available": ignored,
+            "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
+        },
+        "models": models,
+        "selected_model": name,
+        "notes": {"rmse_sim": "free-run simulation error (not one-step prediction)",
+                  "cv_rmse_sim": "blocked k-fold CV is not computed yet (null)"},
+    }
+
+
+def _git_info() -> dict:
+    root = Path(__file__).resolve().parents[1]
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                                text=True, timeout=5).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5).stdout.strip() != ""
+        return {"commit": commit or None, "dirty": dirty if commit else None}
+    except Exception:
+        return {"commit": None, "dirty": None}
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+    out = {"python": platform.python_version(), "sysid-pipeline": __version__}
+    for p in ("numpy", "scipy", "pandas", "numba", "pydantic", "matplotlib", "jinja2", "pyyaml", "scikit-learn",
+              "pysindy", "emcee"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            out[p] = None
+    return out
+
+
+def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
+    target = Path(out) if out else Path("reports") / ctx.run_id
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        t0 = time.perf_counter()
+        (tmp / "summary.json").write_text(dumps(ctx.summary))
+        metrics = {"nominal": ctx.summary["nominal"], "final": ctx.summary["final"],
+                   "models": ctx.summary["models"]}
+        (tmp / "metrics.json").write_text(dumps(metrics))
+        params = {"nominal": _clean(ctx.summary["nominal"]["params"]),
+                  "final": _clean(ctx.summary["final"]["params"]),
+                  "final_equations": dict(ctx.diag.final.model.describe_equations())}
+        (tmp / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+        (tmp / "config.resolved.yaml").write_text(yaml.safe_dump(ctx.lc.canonical(), sort_keys=False))
+        if html:
+            from .report import render_report
+            (tmp / "report.html").write_text(render_report(ctx), encoding="utf-8")
+        manifest = {"run_id": ctx.run_id, "config": str(ctx.lc.path), "config_sha256": ctx.summary["config_sha256"],
+                    "data": ctx.rec.path, "data_sha256": ctx.rec.sha256, "seed": ctx.lc.cfg.seed,
+                    "git": _git_info(), "versions": _versions(), "platform": platform.platform(),
+                    "command": " ".join(sys.argv), "report_seconds": round(time.perf_counter() - t0, 3)}
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return target
+
+
+def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True) -> Path:
+    lc = load_config(config_path)
+    ctx = analyse(lc)
+    return write_run(ctx, Path(out) if out else None, html=html)
