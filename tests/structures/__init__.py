@@ -1,0 +1,1 @@
+"""Tests for pipeline.structures and pipeline.selection (issue 4)."""
