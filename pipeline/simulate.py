@@ -30,7 +30,7 @@ _TEMPLATE = '''\
 import numpy as np
 from numba import njit
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")
 def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
 {unpack}
 {assign}

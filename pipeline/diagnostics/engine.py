@@ -95,9 +95,13 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator, n_b
     n = len(b2)
     L = max(10, int(math.ceil(math.sqrt(n))))
     nb = int(math.ceil(n / L))
+    # block sums from cumulative sums: a resample is nb blocks of L consecutive samples
+    cb = np.concatenate([[0.0], np.cumsum(b2)])
+    ca = np.concatenate([[0.0], np.cumsum(a2)])
     starts = rng.integers(0, n - L + 1, size=(n_boot, nb))
-    idx = (starts[:, :, None] + np.arange(L)[None, None, :]).reshape(n_boot, -1)[:, :n]
-    rel = 1.0 - np.sqrt(a2[idx].sum(axis=1) / b2[idx].sum(axis=1))
+    sb = (cb[starts + L] - cb[starts]).sum(axis=1)
+    sa = (ca[starts + L] - ca[starts]).sum(axis=1)
+    rel = 1.0 - np.sqrt(sa / sb)
     rb, ra = rmse(before), rmse(after)
     lo, hi = np.percentile(rel, [2.5, 97.5])
     return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": 1.0 - ra / rb,
@@ -171,38 +175,33 @@ class Diagnoser:
             if hyp.family == "input_delay":
                 return self._fit_delay(fit)
             start = {c: float(b) for c, b in zip(hyp.coefs, cand.wald.beta)}
-            m = self.hyp_model(fit, hyp, start)
-            return fit_output_error(_with_initial(m, fit), self.prob)
+            return fit_output_error(self.hyp_model(fit, hyp, start), self.prob)
         except Exception as exc:  # a candidate that cannot be fitted is rejected, not fatal
             cand.reason = f"refit failed: {exc}"
             return None
 
-    def _fit_delay(self, fit: FitResult) -> FitResult:
-        """Profile search: SSE over integer delays with the current parameters, then refits at the best
-        integer delay and its neighbours, a parabola through the three SSEs, a final refit there."""
+    def _fit_delay(self, fit: FitResult) -> FitResult | None:
+        """Profile search: weighted SSE over integer delays 0..max with the current parameters, a
+        parabola through the best one and its neighbours for the fractional part, then one refit of
+        all free parameters at that delay. None when the best delay is below a quarter sample."""
         kmax = max(1, int(round(self.max_delay / self.dt)))
-        e_est = []
         y = self.prob.Y[self.prob.split.est_slice()]
+        sse = []
         for k in range(kmax + 1):
             m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
             Yh = self._sim_est(m, fit.x0)
-            e_est.append(np.inf if Yh is None else float(np.sum(((y - Yh) * self.w) ** 2)))
-        k0 = int(np.argmin(e_est))
-        fits = {}
-        for k in (k0 - 1, k0, k0 + 1):
-            if k >= 0:
-                m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
-                fits[k] = fit_output_error(_with_initial(m, fit), self.prob)
-        if len(fits) == 3:
-            s = [fits[k].sse_w for k in (k0 - 1, k0, k0 + 1)]
-            den = s[0] - 2 * s[1] + s[2]
-            frac = float(np.clip(0.5 * (s[0] - s[2]) / den, -0.5, 0.5)) if den > 0 else 0.0
-            if abs(frac) > 0.05:
-                m = fit.model.extend([], {"input_delay_s": (k0 + frac) * self.dt}, delay="input_delay_s")
-                f2 = fit_output_error(_with_initial(m, fit), self.prob)
-                if f2.sse_w < fits[k0].sse_w:
-                    return f2
-        return fits[k0]
+            sse.append(np.inf if Yh is None else float(np.sum(((y - Yh) * self.w) ** 2)))
+        k0 = int(np.argmin(sse))
+        frac = 0.0
+        if 0 < k0 < kmax:
+            s0, s1, s2 = sse[k0 - 1], sse[k0], sse[k0 + 1]
+            den = s0 - 2 * s1 + s2
+            frac = float(np.clip(0.5 * (s0 - s2) / den, -0.5, 0.5)) if den > 0 else 0.0
+        d = (k0 + frac) * self.dt
+        if d < 0.25 * self.dt:
+            return None
+        m = fit.model.extend([], {"input_delay_s": d}, delay="input_delay_s")
+        return fit_output_error(m, self.prob)
 
     # -- one iteration -----------------------------------------------------------------------------
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> list[Candidate]:
@@ -256,6 +255,7 @@ class Diagnoser:
                     continue
                 c.fit = self.refit(current, c)
                 if c.fit is None:
+                    c.reason = c.reason or "no extension estimated (e.g. delay below a quarter sample)"
                     continue
                 c.gain = gain_ci(before, val_resid(c.fit, prob), rng, self.n_boot)
                 c.delta_bic = bic_of(c.fit) - bic0
@@ -311,11 +311,6 @@ class Diagnoser:
         f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic,
                  extended_equations=fit.model.describe_equations())
         return f
-
-
-def _with_initial(m: Model, fit: FitResult) -> Model:
-    """Keep estimated initial states as the refit's starting point."""
-    return m
 
 
 def _cand_record(c: Candidate) -> dict:

@@ -5,7 +5,7 @@ Sources: sample autocorrelation bound ±2.58/√N (99 %) and the input cross-cor
 ``resid`` for coloured inputs, ±2.58·√(Σ_k R̂e(k)R̂u(k))/(√N·√(R̂e(0)R̂u(0))) (Ljung 1999 §16.6);
 Ljung–Box Q = N(N+2) Σ_{k=1}^{m} r_k²/(N−k) ~ χ²_m (Ljung & Box 1978); Fisher's g = max I(f_j)/Σ I(f_j)
 with P(g > x) = Σ_{j≥1} (−1)^{j−1} C(q, j)(1 − jx)_+^{q−1} (Fisher 1929); the mean t-test uses a
-Newey–West long-run variance (Newey & West 1987) so autocorrelated residuals do not inflate it;
+Newey–West long-run variance (Newey & West 1987) with Andrews' (1991) bandwidth so autocorrelated residuals do not inflate it;
 the score/Wald test of added terms uses the same HAC covariance.
 """
 
@@ -94,11 +94,31 @@ def input_crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float 
                       f"largest at lag {lag}; bound from MATLAB resid (coloured input)")
 
 
-def long_run_variance(g: np.ndarray, lags: int | None = None) -> np.ndarray:
-    """Newey–West HAC estimate Ω = Γ0 + Σ_{l=1}^{L} (1 − l/(L+1))(Γ_l + Γ_lᵀ) for rows g_t (N×q)."""
+def andrews_bandwidth(g: np.ndarray) -> int:
+    """Andrews (1991, eq. 6.4) automatic bandwidth for the Bartlett kernel with AR(1) plug-in:
+    α̂(1) = Σ 4ρ²σ⁴/((1−ρ)⁶(1+ρ)²) / Σ σ⁴/(1−ρ)⁴ over the columns, S = 1.1447 (α̂(1) N)^{1/3}."""
     g = np.atleast_2d(g.T).T
     n = g.shape[0]
-    L = int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0))) if lags is None else lags
+    num = den = 0.0
+    for a in range(g.shape[1]):
+        x = g[:, a] - g[:, a].mean()
+        xx = float(np.dot(x[:-1], x[:-1]))
+        if xx <= 0:
+            continue
+        rho = float(np.clip(np.dot(x[1:], x[:-1]) / xx, -0.97, 0.97))
+        s2 = float(np.mean((x[1:] - rho * x[:-1]) ** 2))
+        num += 4 * rho ** 2 * s2 ** 2 / ((1 - rho) ** 6 * (1 + rho) ** 2)
+        den += s2 ** 2 / (1 - rho) ** 4
+    if den == 0:
+        return 0
+    return int(min(n // 4, math.floor(1.1447 * (num / den * n) ** (1.0 / 3.0))))
+
+
+def long_run_variance(g: np.ndarray, lags: int | None = None) -> np.ndarray:
+    """Newey–West HAC estimate Ω = Γ0 + Σ_{l=1}^{L} (1 − l/(L+1))(Γ_l + Γ_lᵀ) for rows g_t (N×q);
+    L from Andrews' automatic rule unless given."""
+    g = np.atleast_2d(g.T).T
+    L = andrews_bandwidth(g) if lags is None else lags
     om = g.T @ g
     for lag in range(1, L + 1):
         gam = g[lag:].T @ g[:-lag]
