@@ -135,7 +135,10 @@ def load_config(path: str | Path) -> LoadedConfig:
     try:
         raw = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
-        raise ConfigError(f"not valid YAML ({exc})", file=fname) from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"not valid YAML{where}: {what}", file=fname) from None
     except UnicodeDecodeError:
         raise ConfigError("not a UTF-8 text file", file=fname) from None
     if not isinstance(raw, dict):

@@ -27,6 +27,7 @@ import yaml
 
 from . import __version__
 from .config import FAMILIES_V1, LoadedConfig, load_config
+from .errors import SimulationError
 from .data import Record, Split, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .fit import FitResult, Problem, equation_error_start
@@ -97,7 +98,10 @@ def analyse(lc: LoadedConfig) -> RunContext:
     d = lc.cfg.diagnose
     dg = Diagnoser(prob, alpha=d.alpha, families=families_of(lc), max_findings=d.max_findings,
                    seed=lc.cfg.seed, n_boot=d.bootstrap, max_delay_s=d.max_delay_s, dt=rec.dt)
-    diag = dg.run(model, start=equation_error_start(model, prob))
+    try:
+        diag = dg.run(model, start=equation_error_start(model, prob))
+    except SimulationError as exc:  # name the config: the parameters or equations are the cause
+        raise SimulationError(str(exc), file=str(lc.path), key="model") from None
     cfg_sha = lc.sha256()
     run_id = f"{lc.cfg.name}-{hashlib.sha256((cfg_sha + rec.sha256).encode()).hexdigest()[:8]}"
     summary = build_summary(lc, rec, prob, diag, run_id, cfg_sha)
