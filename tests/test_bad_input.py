@@ -1,0 +1,167 @@
+"""Bad input: each broken config or record gives exit code 2, one message naming the file and the
+key/column and what was expected, and no run folder (not even a half-written one)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from pipeline.cli import main
+
+GOOD = {
+    "name": "bad", "seed": 0,
+    "data": {"path": "rec.csv", "time": "t", "inputs": ["u"], "outputs": ["x"]},
+    "model": {"states": ["x", "v"], "inputs": ["u"], "params": {"m": 1.0, "c": 0.6, "k": 4.0},
+              "free": ["c", "k"], "equations": {"x": "v", "v": "(u - c*v - k*x)/m"}},
+}
+
+
+def _record(n=400, dt=0.02):
+    rng = np.random.default_rng(0)
+    t = np.arange(n) * dt
+    return pd.DataFrame({"t": t, "u": rng.standard_normal(n), "x": rng.standard_normal(n)})
+
+
+def _set(cfg, dotted, value):
+    d = cfg
+    keys = dotted.split(".")
+    for k in keys[:-1]:
+        d = d[k]
+    if value is _DEL:
+        del d[keys[-1]]
+    else:
+        d[keys[-1]] = value
+
+
+_DEL = object()
+
+CONFIG_CASES = {
+    "unknown_key": (("model.equation", {"x": "v"}), "model.equation: unknown key"),
+    "wrong_type": (("seed", "abc"), "seed"),
+    "missing_required": (("data.outputs", _DEL), "data.outputs: required key is missing"),
+    "unknown_name_in_expression": (("model.equations.v", "(u - c*v - q*x)/m"), "model.equations.v"),
+    "attribute_access": (("model.equations.v", "x.__class__"), "model.equations.v"),
+    "call_of_other_name": (("model.equations.v", "eval('1')"), "eval"),
+    "free_not_in_params": (("model.free", ["c", "zeta"]), "free parameter 'zeta'"),
+    "output_not_a_state": (("data.outputs", {"x": "position"}), "neither a state nor a declared output"),
+    "equation_missing": (("model.equations", {"x": "v"}), "no equation for state 'v'"),
+    "time_and_sample_time": (("data.sample_time", 0.02), "data.time or data.sample_time, not both"),
+    "bad_intersample": (("data.intersample", "cubic"), "data.intersample"),
+    "unknown_family": (("diagnose", {"families": ["cubic_stiffnes"]}), "unknown family 'cubic_stiffnes'"),
+    "overlapping_split": (("split", {"estimation": [0, 300], "validation": [200, None]}), "overlap"),
+    "state_named_like_function": (("model.states", ["sin", "v"]), "reserved"),
+    "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
+}
+
+
+@pytest.mark.parametrize("case", list(CONFIG_CASES))
+def test_bad_config(tmp_path, capsys, case):
+    (path_value, expected) = CONFIG_CASES[case]
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    _set(cfg, *path_value)
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, expected)
+
+
+def _expect_exit2(tmp_path, capsys, expected, config="c.yaml"):
+    out = tmp_path / "runs" / "r"
+    code = main(["report", str(tmp_path / config), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert expected in err, err
+    lines = [ln for ln in err.splitlines() if not ln.startswith("[")]  # progress lines aside
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err
+    assert not out.exists()
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+def _broken_record(kind):
+    df = _record()
+    if kind == "nan":
+        df.loc[57, "x"] = np.nan
+    elif kind == "time_not_increasing":
+        df.loc[100, "t"] = df.loc[99, "t"]
+    elif kind == "nonuniform":
+        df.loc[200:, "t"] += 0.005
+    elif kind == "too_few":
+        df = df.iloc[:20]
+    elif kind == "constant_input":
+        df["u"] = 1.5
+    elif kind == "missing_column":
+        df = df.drop(columns=["x"])
+    elif kind == "non_numeric":
+        df["u"] = df["u"].astype(object)
+        df.loc[12, "u"] = "n/a?"
+    elif kind == "inf":
+        df.loc[3, "u"] = np.inf
+    return df
+
+
+RECORD_CASES = {
+    "nan": "column 'x' has 1 NaN/inf value(s), first at row 57",
+    "inf": "column 'u' has 1 NaN/inf value(s), first at row 3",
+    "time_not_increasing": "not strictly increasing at row 100",
+    "nonuniform": "non-uniform sampling",
+    "too_few": "only 20 samples",
+    "constant_input": "input 'u' is constant",
+    "missing_column": "column 'x' (output) not found",
+    "non_numeric": "non-numeric value 'n/a?' at row 12",
+}
+
+
+@pytest.mark.parametrize("case", list(RECORD_CASES))
+def test_bad_record(tmp_path, capsys, case):
+    _broken_record(case).to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
+    _expect_exit2(tmp_path, capsys, RECORD_CASES[case])
+
+
+def test_nonuniform_message_says_by_how_much(tmp_path, capsys):
+    _broken_record("nonuniform").to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
+    _expect_exit2(tmp_path, capsys, "(25.00 % off; data.max_jitter allows 1.00 %)")
+
+
+def test_messages_name_the_file(tmp_path, capsys):
+    _broken_record("nan").to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
+    _expect_exit2(tmp_path, capsys, str(tmp_path / "rec.csv"))
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["model"]["free"] = ["zeta"]
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model.free:")
+
+
+@pytest.mark.parametrize("content,expected", [
+    (None, "config file not found"),
+    ("name: [unclosed", "not valid YAML"),
+    ("- a\n- b\n", "expected a YAML mapping"),
+])
+def test_unreadable_config(tmp_path, capsys, content, expected):
+    if content is not None:
+        (tmp_path / "c.yaml").write_text(content)
+    _expect_exit2(tmp_path, capsys, expected)
+
+
+def test_missing_data_file_and_unknown_format(tmp_path, capsys):
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
+    _expect_exit2(tmp_path, capsys, "data file not found")
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["data"]["path"] = "rec.xlsx"
+    (tmp_path / "rec.xlsx").write_text("x")
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, "unknown data format '.xlsx'")
+    cfg["data"]["path"] = "rec.parquet"
+    (tmp_path / "rec.parquet").write_bytes(b"not parquet")
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, "cannot read as parquet")
+
+
+def test_model_that_diverges_is_bad_input(tmp_path, capsys):
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["model"]["equations"]["v"] = "(u + c*v + k*x)/m"  # wrong signs: unstable
+    cfg["model"]["params"]["c"] = 5.0
+    _record(n=2000).to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model: the model diverges")

@@ -1,0 +1,54 @@
+"""Real measured data (../shared/datasets). Skipped when absent, required when SYSID_REQUIRE_REALDATA=1."""
+
+import contextlib
+import io
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.config import load_config
+from pipeline.runs import analyse
+from tests.seedcases import require_dataset
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.realdata
+def test_silverbox_names_cubic_stiffness_and_extended_model_reaches_1_5_mV(tmp_path):
+    """Linear MSD fitted on the multisine part (samples 40 650 on), means removed, foh; validated on
+    the arrow (samples 0–40 400). Issue 2: cubic_stiffness named; extended free-run RMSE ≤ 1.5 mV
+    (linear ≈ 14 mV; a careful grey-box Duffing fit ≈ 1 mV)."""
+    csv = require_dataset("silverbox/SNLS80mV.csv")
+    cfg = yaml.safe_load((ROOT / "configs" / "silverbox.yaml").read_text())
+    cfg["data"]["path"] = str(csv)
+    (tmp_path / "sb.yaml").write_text(yaml.safe_dump(cfg))
+    with contextlib.redirect_stderr(io.StringIO()):
+        s = analyse(load_config(tmp_path / "sb.yaml")).summary
+    assert s["data"]["estimation"] == [40650, 131072] and s["data"]["validation"] == [0, 40400]
+    lin = s["nominal"]["validation"]["rmse_sim"]
+    assert 0.010 < lin < 0.018  # the issue's "about 14 mV"
+    f = s["diagnosis"]["findings"][0]
+    assert (f["family"], f["equation"], f["term"]) == ("cubic_stiffness", "v", "x**3")
+    assert f["coefficient"] < 0  # hardening spring: v' = ... + c*x**3 with c < 0
+    after_cubic = f["gain"]["after"]
+    assert after_cubic <= 0.0015
+    assert s["final"]["validation"]["rmse_sim"] <= 0.0015
+    assert f["gain"]["ci95"][0] > 0 and f["delta_bic"] < 0
+
+
+@pytest.mark.realdata
+def test_silverbox_mat_file_loads_like_csv(tmp_path):
+    import numpy as np
+    from pipeline.data import load_record
+    csv = require_dataset("silverbox/SNLS80mV.csv")
+    mat = require_dataset("silverbox/SNLS80mV.mat")
+    cfg = yaml.safe_load((ROOT / "configs" / "silverbox.yaml").read_text())
+    recs = []
+    for p in (csv, mat):
+        cfg["data"]["path"] = str(p)
+        (tmp_path / "sb.yaml").write_text(yaml.safe_dump(cfg))
+        recs.append(load_record(load_config(tmp_path / "sb.yaml")))
+    # the CSV holds 5 significant digits (|x| < 0.31): half a unit in the last place is 5e-6
+    np.testing.assert_allclose(recs[0].outputs["x"], recs[1].outputs["x"], rtol=0, atol=5.0001e-6)
+    assert recs[0].n == recs[1].n == 131072

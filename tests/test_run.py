@@ -1,0 +1,110 @@
+"""The run folder, determinism, the CLI and the report (on the embedded demo)."""
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.io
+import yaml
+
+from pipeline.cli import main
+from pipeline.config import load_config
+from pipeline.data import load_record
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "configs" / "demo.yaml"
+
+
+@pytest.fixture(scope="module")
+def demo_runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("demo")
+    assert main(["report", str(DEMO), "--out", str(base / "a")]) == 0
+    assert main(["diagnose", str(DEMO), "--out", str(base / "b")]) == 0
+    return base / "a", base / "b"
+
+
+def test_demo_names_cubic_stiffness(demo_runs):
+    s = json.loads((demo_runs[0] / "summary.json").read_text())
+    assert s["schema"] == "sysid-summary/1"
+    assert s["diagnosis"]["verdict"] == "discrepancy"
+    f = s["diagnosis"]["findings"][0]
+    assert (f["family"], f["equation"], f["term"]) == ("cubic_stiffness", "v", "x**3")
+    # the demo hides k3 = -3.328 (python -m pipeline.synthetic msd cubic_stiffness --seed 0)
+    assert f["coefficient"] == pytest.approx(-3.328, rel=0.05)
+    for key in ("run_id", "config_sha256", "data_sha256", "nominal", "diagnosis", "models", "selected_model"):
+        assert key in s
+    assert set(s["nominal"]["params"]) == {"c", "k"}
+    assert s["nominal"]["validation"]["rmse_sim"] > 5 * s["final"]["validation"]["rmse_sim"]
+
+
+def test_two_runs_give_byte_identical_summary(demo_runs):
+    a, b = demo_runs
+    assert (a / "summary.json").read_bytes() == (b / "summary.json").read_bytes()
+
+
+def test_run_folder_contents(demo_runs):
+    a, b = demo_runs
+    for f in ("report.html", "summary.json", "config.resolved.yaml", "metrics.json", "params.yaml", "manifest.json"):
+        assert (a / f).is_file(), f
+    assert not (b / "report.html").exists()  # diagnose: no HTML
+    man = json.loads((a / "manifest.json").read_text())
+    assert re.fullmatch(r"[0-9a-f]{64}", man["data_sha256"])
+    assert man["seed"] == 0 and "numpy" in man["versions"] and "dirty" in man["git"]
+    s = json.loads((a / "summary.json").read_text())
+    assert man["data_sha256"] == s["data_sha256"]
+    assert s["run_id"].startswith("demo-") and s["run_id"] == man["run_id"]
+    resolved = yaml.safe_load((a / "config.resolved.yaml").read_text())
+    assert resolved["model"]["free"] == ["c", "k"]
+
+
+def test_report_has_the_sections_a_reader_needs(demo_runs):
+    html = (demo_runs[0] / "report.html").read_text()
+    for needle in ("What the simulation gets wrong", "Why, the fix, and its worth", "cubic_stiffness",
+                   "95 % confidence ellipses", "Residual tests", "validation data", "ΔBIC", "ljung_box"):
+        assert needle in html, needle
+    assert html.count("data:image/png;base64,") >= 7
+    assert "<script" not in html
+
+
+def test_run_id_depends_on_config_and_data_not_clock(tmp_path):
+    shutil.copy(DEMO, tmp_path / "demo.yaml")
+    shutil.copy(ROOT / "data" / "demo.csv", tmp_path / "demo.csv")
+    cfg = yaml.safe_load(DEMO.read_text())
+    cfg["data"]["path"] = "demo.csv"
+    (tmp_path / "demo.yaml").write_text(yaml.safe_dump(cfg))
+    id1 = load_config(tmp_path / "demo.yaml").sha256()
+    cfg["diagnose"]["alpha"] = 0.05
+    (tmp_path / "demo.yaml").write_text(yaml.safe_dump(cfg))
+    assert load_config(tmp_path / "demo.yaml").sha256() != id1
+
+
+def test_template_escapes_user_text(tmp_path):
+    """Autoescape: a config name cannot inject HTML (names are restricted; descriptions are escaped)."""
+    from jinja2 import Environment, PackageLoader, select_autoescape
+    env = Environment(loader=PackageLoader("pipeline.report", "templates"), autoescape=select_autoescape(["html"]))
+    assert env.autoescape("report.html") is True
+
+
+def test_parquet_and_mat_loaders_match_csv(tmp_path):
+    df = pd.read_csv(ROOT / "data" / "demo.csv")
+    df.to_parquet(tmp_path / "d.parquet")
+    scipy.io.savemat(tmp_path / "d.mat", {c: df[c].to_numpy()[None, :] for c in df.columns})
+    cfg = yaml.safe_load(DEMO.read_text())
+    recs = []
+    for name in ("d.parquet", "d.mat"):
+        cfg["data"]["path"] = name
+        (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+        recs.append(load_record(load_config(tmp_path / "c.yaml")))
+    for r in recs:
+        np.testing.assert_array_equal(r.outputs["x"], df["x"].to_numpy())
+        np.testing.assert_array_equal(r.inputs["u"], df["u"].to_numpy())
+        assert r.dt == pytest.approx(0.02)
+
+
+def test_cli_usage_error_is_exit_2(capsys):
+    assert main(["report"]) == 2
+    assert main(["frobnicate", "x.yaml"]) == 2

@@ -1,0 +1,89 @@
+"""Residual statistics against closed forms, published values and Monte Carlo."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from pipeline.diagnostics import stats
+
+
+def test_fisher_g_pvalue_closed_form_small_q():
+    """q = 2: P(g > x) = 2(1 − x) for x ≥ 1/2 (Fisher 1929 with only the j = 1 term non-zero)."""
+    assert stats.fisher_g_pvalue(0.7, 2) == pytest.approx(2 * 0.3)
+    # q = 3, x = 0.4: 3·0.6² − 3·0.2² = 0.96
+    assert stats.fisher_g_pvalue(0.4, 3) == pytest.approx(3 * 0.6 ** 2 - 3 * 0.2 ** 2)
+
+
+def test_fisher_g_size_under_white_noise_and_detects_sinusoid():
+    rng = np.random.default_rng(1)
+    rej = sum(stats.fisher_g(rng.standard_normal(512), 0.05)[0].p_value < 0.05 for _ in range(400))
+    assert 8 <= rej <= 35  # 5 % of 400 = 20
+    n = 1000
+    x = rng.standard_normal(n) + 0.3 * np.sin(2 * np.pi * 0.123 * np.arange(n))
+    res, f = stats.fisher_g(x, 0.01)
+    assert not res.passed and res.p_value < 1e-4  # expected ≈ 5e-6 for A = 0.3, n = 1000
+    assert f == pytest.approx(0.123, abs=0.5 / n)
+
+
+def test_ljung_box_matches_formula():
+    rng = np.random.default_rng(2)
+    e = rng.standard_normal(300)
+    r, _ = stats.autocorr(e, 10)
+    ec = e - e.mean()
+    rk = [np.dot(ec[k:], ec[:len(ec) - k]) / np.dot(ec, ec) for k in range(11)]
+    np.testing.assert_allclose(r, rk, atol=1e-12)
+    q = 300 * 302 * sum(rk[k] ** 2 / (300 - k) for k in range(1, 11))
+    res = stats.ljung_box(e, 10)
+    assert res.statistic == pytest.approx(q)
+    assert res.p_value == pytest.approx(sps.chi2.sf(q, 10))
+
+
+def test_autocorr_bound_is_2_58_over_sqrt_n():
+    _, b = stats.autocorr(np.random.default_rng(0).standard_normal(400), 5, 0.99)
+    assert b == pytest.approx(2.5758 / 20, rel=1e-4)
+
+
+def test_resid_crosscorr_bound_white_input_reduces_to_2_58_over_sqrt_n_and_grows_for_coloured():
+    rng = np.random.default_rng(3)
+    e, u = rng.standard_normal(4000), rng.standard_normal(4000)
+    _, _, b_white = stats.crosscorr(e, u, 10, 0.99)
+    assert b_white == pytest.approx(2.5758 / math.sqrt(4000), rel=0.15)
+    # coloured e and u (AR(1), 0.9): Σ r_e r_u = (1 + 0.81)/(1 − 0.81) ≈ 9.5 → bound ≈ √9.5 × larger
+    from scipy.signal import lfilter
+    ec, uc = lfilter([1], [1, -0.9], e), lfilter([1], [1, -0.9], u)
+    _, _, b_col = stats.crosscorr(ec, uc, 10, 0.99)
+    assert b_col / b_white == pytest.approx(math.sqrt(1.81 / 0.19), rel=0.2)
+
+
+def test_mean_test_hac_keeps_size_for_autocorrelated_noise():
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(4)
+    rej = 0
+    for _ in range(300):
+        e = lfilter([1], [1, -0.8], rng.standard_normal(2000))
+        rej += stats.mean_test(e, 0.05).p_value < 0.05
+    assert rej <= 30  # a naive t-test rejects ~60 % here; HAC with Andrews' bandwidth stays near 5 % (≤ 10 %)
+
+
+def test_added_terms_wald_size_and_power():
+    rng = np.random.default_rng(5)
+    n = 1500
+    J = rng.standard_normal((n, 2))
+    S = rng.standard_normal((n, 1)) + 0.5 * J[:, :1]
+    rej = 0
+    for _ in range(300):
+        e = rng.standard_normal(n)
+        e = e - J @ np.linalg.lstsq(J, e, rcond=None)[0]
+        rej += stats.added_terms_test(e, J, S).p_value < 0.01
+    assert rej <= 9  # 1 % of 300 = 3
+    e = rng.standard_normal(n) + 0.2 * (S[:, 0] - 0.5 * J[:, 0])
+    w = stats.added_terms_test(e, J, S)
+    assert w.p_value < 1e-6 and w.beta[0] == pytest.approx(0.2, abs=0.06)
+
+
+def test_holm_step_down():
+    out = stats.holm({"a": 0.001, "b": 0.015, "c": 0.03, "d": 0.5}, 0.05)
+    # 0.001 ≤ .05/4; 0.015 ≤ .05/3; 0.03 > .05/2 → stop
+    assert out == {"a": True, "b": True, "c": False, "d": False}
