@@ -3,7 +3,7 @@
 Fixed-step classical RK4 (``model.substeps`` steps per sample interval). Between samples the input is
 held (``zoh``) or linearly interpolated (``foh``), as MATLAB's InterSample. The right-hand side is
 generated from the checked expressions as Python source, written to a per-structure module in a cache
-folder and compiled by numba with ``cache=True``: one compile per model *structure* and machine, reused
+folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate refits run in threads): one compile per model *structure* and machine, reused
 across processes. Extension terms are a table evaluated inside the same kernel, so refitting a
 candidate extension never recompiles. Divergence (non-finite or beyond ``bound``) stops the loop and is
 reported with its sample index; a fixed-step loop cannot hang.
@@ -30,7 +30,7 @@ _TEMPLATE = '''\
 import numpy as np
 from numba import njit
 
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False, nogil=True, inline="always")
 def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
 {unpack}
 {assign}
@@ -55,7 +55,7 @@ def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
         dx[k_eq[j]] += p[k_pc[j]] * val
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf, bound, X):
     n = U.shape[0]
     nx = x0.shape[0]

@@ -17,7 +17,9 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -249,11 +251,15 @@ class Diagnoser:
             rng = np.random.default_rng([self.seed, it])
             before = val_resid(current, prob)
             bic0 = bic_of(current)
+            todo = [c for c in cands if fired[c.hyp.family]]
             for c in cands:
                 if not fired[c.hyp.family]:
                     c.reason = "not significant after Holm correction"
-                    continue
-                c.fit = self.refit(current, c)
+            # refits are independent: run them in threads (the kernel releases the GIL)
+            with ThreadPoolExecutor(max_workers=min(len(todo), os.cpu_count() or 1) or 1) as pool:
+                for c, f in zip(todo, pool.map(lambda c: self.refit(current, c), todo)):
+                    c.fit = f
+            for c in todo:
                 if c.fit is None:
                     c.reason = c.reason or "no extension estimated (e.g. delay below a quarter sample)"
                     continue
