@@ -134,12 +134,18 @@ def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None
 
 
 def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | None = None,
-                     max_nfev: int = 200) -> FitResult:
-    """Output-error fit of ``model.free`` (and initial states marked "estimate")."""
+                     max_nfev: int = 200, loss="linear", f_scale: float = 1.0,
+                     sample_weights: np.ndarray | None = None) -> FitResult:
+    """Output-error fit of ``model.free`` (and initial states marked "estimate").
+
+    ``loss``/``f_scale`` are passed to ``least_squares`` (a robust ρ, e.g. a Student-t negative
+    log-likelihood as a callable of z = r²); ``sample_weights`` (n_est,) multiply each estimation
+    sample's residual (weighted LS, e.g. 1/σ_k for a variance model)."""
     est = prob.split.est
     stop = est[1]
     w = prob.weights
     yobs = prob.Y[est[0]:stop]
+    sw = np.ones((yobs.shape[0], 1)) if sample_weights is None else np.asarray(sample_weights, float)[:, None]
     x0_names = [f"x0.{s}" for s in model.states if model.initial[s] == "estimate"]
     names = list(model.free) + x0_names
     x0_base = initial_state(model, prob)
@@ -160,21 +166,22 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         Yh = _sim(m, prob, x0, stop)
         if Yh is None or not np.all(np.isfinite(Yh)):
             return penalty
-        return ((yobs - Yh[est[0]:stop]) * w).ravel()
+        return ((yobs - Yh[est[0]:stop]) * w * sw).ravel()
 
     if len(th0):
         r0 = resid(th0)
         if r0 is penalty:
             raise SimulationError("the model diverges with its initial parameter values; check the "
                                   "equations' signs, model.params and model.initial")
-        sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf")
+        sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
+                            f_scale=f_scale)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)
     else:
         th, J, ok, msg, nfev = th0, np.zeros((yobs.size, 0)), True, "nothing to fit", 0
     m, x0 = unpack(th)
     Yh = simulate_full(m, prob, x0)
     r = yobs - Yh[est[0]:stop]
-    rw = (r * w).ravel()
+    rw = (r * w * sw).ravel()
     sse = float(rw @ rw)
     dof = max(rw.size - len(th), 1)
     cov = np.full((len(th), len(th)), np.nan)

@@ -78,9 +78,35 @@ def _input(rng: np.random.Generator, n: int, dt: float, mean: float, std: float,
     return mean + std * w / np.std(w)
 
 
+NOISE_KINDS = ("white", "ar1", "student_t", "hetero")
+
+
+def measurement_noise(rng: np.random.Generator, y: np.ndarray, level: float, kind: str = "white",
+                      param: float | None = None) -> np.ndarray:
+    """Output noise with std ``level`` (absolute): white Gaussian; ``ar1`` (coefficient ``param``,
+    default 0.9, scaled to the same std); ``student_t`` (ν = ``param``, default 3, scaled to the same
+    std); ``hetero`` (std ∝ (0.2 + |y − ȳ|/std(y)), normalised to the same average variance)."""
+    n = len(y)
+    if kind == "white":
+        return level * rng.standard_normal(n)
+    if kind == "ar1":
+        phi = 0.9 if param is None else param
+        e = signal.lfilter([1.0], [1.0, -phi], rng.standard_normal(n + 500))[500:]
+        return level * e * np.sqrt(1 - phi ** 2)
+    if kind == "student_t":
+        nu = 3.0 if param is None else param
+        return level * rng.standard_t(nu, n) / np.sqrt(nu / (nu - 2))
+    if kind == "hetero":
+        s = 0.2 + np.abs(y - y.mean()) / (np.std(y) or 1.0)
+        s = s / np.sqrt(np.mean(s ** 2))
+        return level * s * rng.standard_normal(n)
+    raise ValueError(f"unknown noise kind {kind!r}; known: {', '.join(NOISE_KINDS)}")
+
+
 def generate(system: str, effect: str, seed: int, *, n: int = 3000, noise: float = 0.02,
-             strength: float = 1.0) -> Synthetic:
-    """A record of ``system`` with ``effect`` hidden in it; ``strength`` scales the effect."""
+             strength: float = 1.0, noise_kind: str = "white", noise_param: float | None = None) -> Synthetic:
+    """A record of ``system`` with ``effect`` hidden in it; ``strength`` scales the effect;
+    ``noise`` × std(y) is the measurement-noise level, of kind ``noise_kind`` (see measurement_noise)."""
     if system not in BASE:
         raise ValueError(f"unknown system {system!r}; known: {', '.join(BASE)}")
     if effect not in EFFECTS:
@@ -131,7 +157,8 @@ def generate(system: str, effect: str, seed: int, *, n: int = 3000, noise: float
         out_offset = 0.3 * ystd * strength
         truth.update(value=out_offset, output=b["measured"], equation=None)
     y = _simulate(m, t, u) + out_offset
-    y = y + noise * ystd * rng.standard_normal(n)
+    y = y + measurement_noise(rng, y, noise * ystd, noise_kind, noise_param)
+    truth["noise"] = {"kind": noise_kind, "param": noise_param, "std": noise * ystd}
     cfg = {"states": b["states"], "inputs": b["inputs"], "params": dict(b["params"]), "free": list(b["free"]),
            "equations": dict(b["equations"]), "initial": {s: 0.0 for s in b["states"]}}
     return Synthetic(t, u, y, system, effect, truth, cfg)
