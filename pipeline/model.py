@@ -112,3 +112,37 @@ class Model:
                     txt += f" + {t.coef}*{t.label}"
             out[s] = txt
         return out
+
+
+def term_values(kind: str, z: np.ndarray | None, t: np.ndarray, power: int = 1, freq: float = 0.0) -> np.ndarray:
+    """Values of one extension term (as the kernel evaluates it) on arrays."""
+    if kind == "const":
+        return np.ones_like(t, dtype=float)
+    if kind == "pow":
+        return z ** power
+    if kind == "sign":
+        return np.sign(z)
+    if kind == "absprod":
+        return z * np.abs(z)
+    if kind == "sin":
+        return np.sin(2 * np.pi * freq * t)
+    if kind == "cos":
+        return np.cos(2 * np.pi * freq * t)
+    raise ValueError(kind)
+
+
+def rhs_vectorized(model: Model, X: np.ndarray, U: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """f(x, u, t; θ) of the (extended) model evaluated row-wise on arrays (N, nx), (N, nu), (N,)."""
+    from .expressions import vectorize
+    args = list(model.states) + list(model.inputs) + list(model.nominal_params) + ["t"]
+    vals = [X[:, i] for i in range(X.shape[1])] + [U[:, j] for j in range(len(model.inputs))]
+    vals += [model.params[k] for k in model.nominal_params] + [t]
+    out = np.column_stack([np.broadcast_to(np.asarray(vectorize(model.equations[s], args)(*vals), float), t.shape)
+                           for s in model.states])
+    for term in model.terms:
+        if term.kind == "out_const":
+            continue
+        z = X[:, model.states.index(term.var)] if term.var else None
+        fz = model.params[term.freq] if term.freq else 0.0
+        out[:, model.states.index(term.target)] += model.params[term.coef] * term_values(term.kind, z, t, term.power, fz)
+    return out

@@ -68,3 +68,26 @@ def test_null_no_hidden_effect_gives_at_most_one_finding(tmp_path):
         else:
             assert summary["diagnosis"]["verdict"] == "no_significant_discrepancy"
     assert len(with_findings) <= 1, with_findings
+
+
+def test_equation_error_evidence_when_states_are_measured(tmp_path):
+    """tank: every state measured, so the finding also carries the equation-error regression on the
+    candidate term. It is evidence (significance and sign), not the estimate: noise in the measured
+    regressors attenuates its slope (errors-in-variables); the finding's coefficient is the OE one."""
+    summary, syn = run_case(tmp_path, "tank", "offset", 0)
+    ev = {e["test"]: e for e in summary["diagnosis"]["findings"][0]["evidence"]}
+    ee = ev["equation_error_wald[offset:h]"]
+    assert ee["p_value"] < 1e-6
+    assert ee["coefficient"][0] * syn.truth["coefficient"] > 0
+
+
+def test_delay_evidence_includes_crosscorrelation_lag(tmp_path):
+    """The measurement lags the nominal simulation (positive alignment lag, significant). The lag is
+    shrunk toward 0 because the fitted nominal partly compensates the delay; the delay itself comes
+    from the profile search, tested to 1.5 samples above."""
+    for system in ("tank", "msd"):
+        summary, syn = run_case(tmp_path / system, system, "input_delay", 0)
+        ev = {e["test"]: e for e in summary["diagnosis"]["findings"][0]["evidence"]}
+        lag = ev["output_simulation_crosscorrelation_lag"]
+        assert 0 < lag["statistic"] <= syn.truth["delay_s"] / summary["data"]["sample_time"] + 1.5
+        assert lag["p_value"] < 0.01

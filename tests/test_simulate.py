@@ -78,3 +78,18 @@ def test_input_delay_shifts_the_response():
     x = simulate_states(m, t, U, np.zeros(1)).X[:, 0]
     x0 = simulate_states(m0, t, U, np.zeros(1)).X[:, 0]
     np.testing.assert_allclose(x[10:], x0[:-10], atol=1e-9)
+
+
+def test_rhs_vectorized_matches_the_written_out_equation():
+    from pipeline.expressions import vectorize
+    from pipeline.model import rhs_vectorized
+    base = _model({"x": "v", "v": "u - c*v - 4*x"}, {"c": 0.5}, ["x", "v"])
+    ext = base.extend([Term("cubic_stiffness", "pow", "v", "a", var="x", power=3),
+                       Term("periodic_disturbance", "cos", "v", "d", freq="f")], {"a": -2.0, "d": 0.1, "f": 0.7})
+    rng = np.random.default_rng(0)
+    X, U, t = rng.normal(size=(50, 2)), rng.normal(size=(50, 1)), np.linspace(0, 3, 50)
+    full = parse("u - 0.5*v - 4*x - 2*x**3 + 0.1*cos(2*3.141592653589793*0.7*t)", {"x", "v", "u", "t"})
+    ref = vectorize(full, ["x", "v", "u", "t"])(X[:, 0], X[:, 1], U[:, 0], t)
+    got = rhs_vectorized(ext, X, U, t)
+    np.testing.assert_allclose(got[:, 1], ref, atol=1e-12)
+    np.testing.assert_allclose(got[:, 0], X[:, 1])

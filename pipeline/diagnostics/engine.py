@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import criteria
 from ..fit import FitResult, Problem, fit_output_error
-from ..model import Model
+from ..model import Model, rhs_vectorized, term_values
 from ..simulate import outputs, simulate_states
 from . import stats
 from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
@@ -231,8 +231,73 @@ class Diagnoser:
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
                 best.p_family = max(best.p_family, fisher.p_value)
+            if fam == "input_delay":
+                best.evidence.append(self._xcorr_lag(fit))
+            ee = self._equation_error_evidence(fit, best.hyp)
+            if ee:
+                best.evidence.append(ee)
             out.append(best)
         return out
+
+    def _xcorr_lag(self, fit: FitResult) -> dict:
+        """Lag (samples, parabola-refined) that maximises the cross-correlation of the measured output
+        with the nominal simulation on the estimation part: > 0 when the measurement lags the
+        simulation, i.e. a dead time. p-value: the residual–input cross-correlation test."""
+        sl = self.prob.split.est_slice()
+        y = self.prob.Y[sl, 0] - self.prob.Y[sl, 0].mean()
+        yh = fit.Yhat[sl, 0] - fit.Yhat[sl, 0].mean()
+        n = len(y)
+        kmax = max(2, int(round(self.max_delay / self.dt)))
+        f = np.fft.irfft(np.fft.rfft(y, 2 * n) * np.conj(np.fft.rfft(yh, 2 * n)))
+        lags = np.arange(-kmax, kmax + 1)
+        c = np.array([f[k] if k >= 0 else f[2 * n + k] for k in lags])
+        k = int(np.argmax(c))
+        shift = 0.0
+        if 0 < k < len(c) - 1:
+            den = c[k - 1] - 2 * c[k] + c[k + 1]
+            shift = float(np.clip(0.5 * (c[k - 1] - c[k + 1]) / den, -0.5, 0.5)) if den != 0 else 0.0
+        xc = stats.input_crosscorr(fit.resid_est[:, 0], self.prob.U[sl, 0], 25, self.alpha)
+        return {"test": "output_simulation_crosscorrelation_lag", "statistic": float(lags[k] + shift),
+                "p_value": xc.p_value, "detail": "lag in samples (biased toward 0: the fitted nominal partly compensates a delay); "
+                          "p from the residual-input cross-correlation"}
+
+    def _equation_error_evidence(self, fit: FitResult, hyp) -> dict | None:
+        """When every state is measured: regress the equation error ẋ − f(x, u; θ̂) of the hypothesis'
+        equation (ẋ by a Savitzky–Golay derivative, window 7, order 2) on the candidate term evaluated
+        on the measured states; HAC Wald test of the slope (intercept partialled out)."""
+        m = fit.model
+        prob = self.prob
+        if hyp.equation is None or not all(st in prob.out_names for st in m.states):
+            return None
+        from scipy.signal import savgol_filter
+        sl = prob.split.est_slice()
+        X = np.column_stack([prob.Y[sl, prob.out_names.index(st)] for st in m.states])
+        if len(X) < 20:
+            return None
+        i = m.states.index(hyp.equation)
+        dx = savgol_filter(X[:, i], 7, 2, deriv=1, delta=self.dt)
+        f = rhs_vectorized(m, X, prob.U[sl], prob.t[sl])[:, i]
+        eps = dx - f
+        cols = []
+        for term in hyp.terms:
+            z = X[:, m.states.index(term.var)] if term.var else None
+            fz = float(hyp.extra_params.get(term.freq, 0.0)) if term.freq else 0.0
+            cols.append(term_values(term.kind, z, prob.t[sl], term.power, fz))
+        S = np.column_stack(cols)
+        # partial out the fitted parameters: J = ∂f_i/∂θ at θ̂ (central differences), an LM test in
+        # equation-error form (the biased θ̂ of a misspecified model absorbs part of a missing term)
+        J = []
+        for name in m.free:
+            h = 1e-6 * max(abs(m.params[name]), 1e-3)
+            up = rhs_vectorized(m.with_params({name: m.params[name] + h}), X, prob.U[sl], prob.t[sl])[:, i]
+            dn = rhs_vectorized(m.with_params({name: m.params[name] - h}), X, prob.U[sl], prob.t[sl])[:, i]
+            J.append((up - dn) / (2 * h))
+        J = np.column_stack(J) if J else np.zeros((len(eps), 0))
+        keep = np.std(J, axis=0) > 0 if J.size else np.zeros(0, bool)
+        J = J[:, keep] if J.size else J
+        w = stats.added_terms_test(eps, J, S)
+        return {"test": f"equation_error_wald[{hyp.key}]", "statistic": w.statistic, "p_value": w.p_value,
+                "dof": w.dof, "coefficient": [float(b) for b in w.beta]}
 
     def run(self, model: Model, start: dict | None = None) -> Diagnosis:
         prob = self.prob
