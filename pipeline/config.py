@@ -84,6 +84,49 @@ class DiagnoseCfg(_Strict):
         return v
 
 
+ESTIMATOR_IDS = ("ls", "wls", "iv", "ml", "map", "mcmc", "rls")
+
+
+class PrefilterStepCfg(_Strict):
+    """One prefilter step (pipeline.prefilter): name, parameters, and the signals it applies to."""
+
+    name: Literal["remove_mean", "remove_trend", "lowpass", "state_variable_filter", "notch", "decimate"]
+    params: dict[str, Union[float, int, str, bool, None]] = Field(default_factory=dict)
+    signals: list[str] | None = None   # model names (inputs/outputs); default: all
+
+
+class DerivativeCfg(_Strict):
+    method: Literal["fd", "savgol", "spline", "tv"] = "savgol"
+    window: int = Field(default=11, ge=3)
+    polyorder: int = Field(default=3, ge=1)
+
+
+class LibraryCfg(_Strict):
+    """Candidate terms generated from a library (union of the listed families) for ERR/FROLS."""
+
+    poly: dict[str, Union[list[str], int, bool]] | None = None   # {vars: [x], degree: 3}
+    tanh: list[str] | None = None
+    rational: list[str] | None = None
+    sign: list[str] | None = None
+    terms: list[str] | None = None
+    max_terms: int = Field(default=8, ge=1, le=100)
+    criterion: Literal["bic", "aic", "aicc", "fpe"] = "bic"
+
+
+class StructuresCfg(_Strict):
+    """Candidate structures for one state equation: d(equation)/dt = known + Σ θ_i term_i."""
+
+    equation: str
+    known: Union[str, float] = 0.0
+    candidates: dict[str, list[str]] = Field(default_factory=dict)
+    library: LibraryCfg | None = None
+    sindy: dict[str, Union[list[float], float, str]] | None = None        # {threshold: [...], optimizer}
+    takagi_sugeno: dict[str, Union[list[int], list[str], str, float]] | None = None  # {inputs: [x], rules: [2, 5, 11]}
+    derivative: DerivativeCfg = Field(default_factory=DerivativeCfg)
+    cv_folds: int = Field(default=10, ge=2, le=50)
+    cv_gap: int = Field(default=10, ge=0)
+
+
 class Config(_Strict):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     seed: int = 0
@@ -91,6 +134,30 @@ class Config(_Strict):
     model: ModelCfg
     split: SplitCfg = Field(default_factory=SplitCfg)
     diagnose: DiagnoseCfg = Field(default_factory=DiagnoseCfg)
+    prefilter: list[PrefilterStepCfg] = Field(default_factory=list)
+    structures: StructuresCfg | None = None
+    # estimators run on every candidate structure: names or {name: {options}}
+    estimators: list[Union[str, dict[str, dict[str, Union[float, int, str, bool, list[float], None]]]]] = \
+        Field(default_factory=lambda: ["ls"])
+
+    @field_validator("estimators")
+    @classmethod
+    def _known_estimators(cls, v):
+        for item in v:
+            names = [item] if isinstance(item, str) else list(item)
+            for n in names:
+                if n not in ESTIMATOR_IDS:
+                    raise ValueError(f"unknown estimator {n!r}; known: {', '.join(ESTIMATOR_IDS)}")
+        return v
+
+    def estimator_list(self) -> list[tuple[str, dict]]:
+        out = []
+        for item in self.estimators:
+            if isinstance(item, str):
+                out.append((item, {}))
+            else:
+                out.extend((k, dict(o or {})) for k, o in item.items())
+        return out
 
 
 class LoadedConfig:
@@ -220,4 +287,23 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
         if rng is not None and (rng[0] < 0 or (rng[1] is not None and rng[1] <= rng[0])):
             raise ConfigError(f"expected [start, stop) with 0 <= start < stop, got {list(rng)}",
                               file=f, key=f"split.{key}")
+    if cfg.structures is not None:
+        st = cfg.structures
+        if st.equation not in m.states:
+            raise ConfigError(f"{st.equation!r} is not a state (states: {m.states})", file=f, key="structures.equation")
+        parse(st.known, allowed, where="structures.known", file=f)
+        if not st.candidates and st.library is None and st.sindy is None and st.takagi_sugeno is None:
+            raise ConfigError("no candidate structure: give candidates, a library, sindy or takagi_sugeno",
+                              file=f, key="structures")
+        for name, terms in st.candidates.items():
+            if not terms:
+                raise ConfigError("empty term list", file=f, key=f"structures.candidates.{name}")
+            for i, term in enumerate(terms):
+                parse(term, allowed - set(m.params), where=f"structures.candidates.{name}[{i}]", file=f)
+    signals = set(imap.values()) | set(omap.values())
+    for i, step in enumerate(cfg.prefilter):
+        for sig in step.signals or []:
+            if sig not in signals:
+                raise ConfigError(f"{sig!r} is not a measured signal (known: {sorted(signals)})",
+                                  file=f, key=f"prefilter[{i}].signals")
     return LoadedConfig(cfg, path, eqs, outs, imap, omap)

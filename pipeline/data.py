@@ -197,3 +197,37 @@ def remove_means(rec: Record, split: Split) -> None:
             rec.means[k] = m
     rec.log.append("means over the estimation part removed: "
                    + ", ".join(f"{k}={v:.6g}" for k, v in rec.means.items()))
+
+
+def apply_prefilters(rec: Record, steps, file: str) -> list[dict]:
+    """Apply the config's prefilter steps (pipeline.prefilter) in order; returns the log entries.
+    ``decimate`` acts on every signal and on the time axis; other steps on ``signals`` (default all)."""
+    from .errors import InputError
+    from .prefilter import Prefilter
+    log = []
+    for i, st in enumerate(steps):
+        key = f"prefilter[{i}]"
+        names = st.signals or list(rec.inputs) + list(rec.outputs)
+        if st.name == "decimate":
+            names = list(rec.inputs) + list(rec.outputs)
+        step = Prefilter(st.name, dict(st.params))
+        warns, info = [], {}
+        try:
+            for d in (rec.inputs, rec.outputs):
+                for k in d:
+                    if k in names:
+                        res = step.apply(d[k], rec.dt)
+                        d[k] = np.asarray(res.y, float)
+                        warns += [f"{k}: {w}" for w in res.warnings]
+                        info = res.info or info
+        except InputError as exc:
+            raise DataError(str(exc), file=file, key=key) from None
+        if st.name == "decimate":
+            q = int(st.params.get("q", 1))
+            rec.t = rec.t[::q][: len(next(iter(rec.outputs.values())))]
+            rec.dt = rec.dt * q
+        entry = {"name": st.name, "params": dict(st.params), "signals": names, "warnings": warns, "info": info}
+        log.append(entry)
+        rec.log.append(f"prefilter {st.name} {dict(st.params)} on {', '.join(names)}"
+                       + (f" (warnings: {'; '.join(warns)})" if warns else ""))
+    return log

@@ -28,7 +28,7 @@ import yaml
 from . import __version__
 from .config import FAMILIES_V1, LoadedConfig, load_config
 from .errors import SimulationError
-from .data import Record, Split, load_record, make_split, remove_means
+from .data import Record, Split, apply_prefilters, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .fit import FitResult, Problem, equation_error_start
 from .model import Model
@@ -46,6 +46,7 @@ class RunContext:
     diag: Diagnosis
     run_id: str
     summary: dict
+    comparison: object = None
 
 
 def _clean(x):
@@ -90,6 +91,7 @@ def families_of(lc: LoadedConfig) -> list[str]:
 
 def analyse(lc: LoadedConfig) -> RunContext:
     rec = load_record(lc)
+    prefilter_log = apply_prefilters(rec, lc.cfg.prefilter, str(lc.path)) if lc.cfg.prefilter else []
     split = make_split(lc, rec.n)
     if lc.cfg.data.remove_mean:
         remove_means(rec, split)
@@ -102,10 +104,23 @@ def analyse(lc: LoadedConfig) -> RunContext:
         diag = dg.run(model, start=equation_error_start(model, prob))
     except SimulationError as exc:  # name the config: the parameters or equations are the cause
         raise SimulationError(str(exc), file=str(lc.path), key="model") from None
+    comparison = None
+    if lc.cfg.structures is not None:
+        from .compare import Comparer
+        comparison = Comparer(lc, rec, split, model).run()
     cfg_sha = lc.sha256()
     run_id = f"{lc.cfg.name}-{hashlib.sha256((cfg_sha + rec.sha256).encode()).hexdigest()[:8]}"
     summary = build_summary(lc, rec, prob, diag, run_id, cfg_sha)
-    return RunContext(lc, rec, split, model, prob, diag, run_id, summary)
+    summary["data"]["prefilter"] = prefilter_log
+    if comparison is not None:
+        summary["models"] += [r.record() for r in comparison.results]
+        summary["structures"] = {"settings": comparison.settings, "selected": comparison.selected,
+                                 "frols": comparison.frols, "sindy": comparison.sindy,
+                                 "takagi_sugeno": comparison.takagi_sugeno, "warnings": comparison.warnings}
+        summary["selected_structure"] = comparison.selected
+        summary["notes"]["cv_rmse_sim"] = ("per-fold free-run RMSE of blocked k-fold CV on the estimation part "
+                                           "(candidate structures); null for the diagnosis chain")
+    return RunContext(lc, rec, split, model, prob, diag, run_id, summary, comparison)
 
 
 def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> dict:

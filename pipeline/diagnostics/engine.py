@@ -186,8 +186,8 @@ class Diagnoser:
         """Profile search: weighted SSE over integer delays 0..max with the current parameters, a
         parabola through the best one and its neighbours for the fractional part, then one refit of
         all free parameters at that delay. None when the best delay is below a quarter sample."""
-        kmax = max(1, int(round(self.max_delay / self.dt)))
         y = self.prob.Y[self.prob.split.est_slice()]
+        kmax = max(1, min(int(round(self.max_delay / self.dt)), len(y) // 4))
         sse = []
         for k in range(kmax + 1):
             m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
@@ -247,7 +247,7 @@ class Diagnoser:
         y = self.prob.Y[sl, 0] - self.prob.Y[sl, 0].mean()
         yh = fit.Yhat[sl, 0] - fit.Yhat[sl, 0].mean()
         n = len(y)
-        kmax = max(2, int(round(self.max_delay / self.dt)))
+        kmax = max(1, min(int(round(self.max_delay / self.dt)), n // 4))
         f = np.fft.irfft(np.fft.rfft(y, 2 * n) * np.conj(np.fft.rfft(yh, 2 * n)))
         lags = np.arange(-kmax, kmax + 1)
         c = np.array([f[k] if k >= 0 else f[2 * n + k] for k in lags])

@@ -40,9 +40,14 @@ def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
     return r
 
 
+def _lags(n: int, nlags: int) -> int:
+    """At most N/4 lags (and at least 1): short records get fewer lags, never an error."""
+    return max(1, min(nlags, n // 4))
+
+
 def autocorr(e: np.ndarray, nlags: int = 25, level: float = 0.99) -> tuple[np.ndarray, float]:
     """Normalised autocorrelation r_k (k = 0..nlags) and the bound z/√N (2.58/√N at 99 %)."""
-    r = _acf(e, nlags)
+    r = _acf(e, _lags(len(e), nlags))
     z = stats.norm.ppf(0.5 + level / 2)
     return r / r[0], float(z / math.sqrt(len(e)))
 
@@ -51,6 +56,7 @@ def crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, level: float = 0.99
     """Cross-correlation R̂eu(τ)/√(R̂e(0)R̂u(0)) for τ = −nlags..nlags and MATLAB resid's bound
     for a coloured input: z·√(Σ_k r_e(k) r_u(k))/√N with normalised autocorrelations."""
     n = len(e)
+    nlags = _lags(n, nlags)
     e0, u0 = e - e.mean(), u - u.mean()
     f = np.fft.irfft(np.fft.rfft(e0, 2 * n) * np.conj(np.fft.rfft(u0, 2 * n)))
     lags = np.arange(-nlags, nlags + 1)
@@ -66,6 +72,7 @@ def crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, level: float = 0.99
 
 def ljung_box(e: np.ndarray, nlags: int = 20, alpha: float = 0.01) -> TestResult:
     n = len(e)
+    nlags = _lags(n, nlags)
     r, _ = autocorr(e, nlags)
     k = np.arange(1, nlags + 1)
     q = float(n * (n + 2) * np.sum(r[1:] ** 2 / (n - k)))
@@ -75,6 +82,7 @@ def ljung_box(e: np.ndarray, nlags: int = 20, alpha: float = 0.01) -> TestResult
 
 
 def whiteness(e: np.ndarray, nlags: int = 25, alpha: float = 0.01) -> TestResult:
+    nlags = _lags(len(e), nlags)
     r, bound = autocorr(e, nlags, 1 - alpha)
     worst = float(np.max(np.abs(r[1:])))
     n_out = int(np.sum(np.abs(r[1:]) > bound))

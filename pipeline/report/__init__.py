@@ -40,9 +40,16 @@ def render_report(ctx) -> str:
         params.append({"name": name, "nominal": diag.nominal.theta[i], "nominal_std": diag.nominal.std[i]})
     final_params = [{"name": n, "value": v, "std": s}
                     for n, v, s in zip(diag.final.names, diag.final.theta, diag.final.std)]
+    st = ctx.summary.get("structures")
+    if st:
+        figs["err"] = figures.err_chart(st["frols"]) if st.get("frols") else None
+        figs["ts"] = figures.ts_memberships(st["takagi_sugeno"]) if st.get("takagi_sugeno") else None
+    structure_rows = [m for m in ctx.summary["models"] if "cv_rmse_one_step" in m]
+    structure_rows.sort(key=lambda m: (m["cv_mean"] is None, m["cv_mean"] if m["cv_mean"] is not None else 0))
     env = Environment(loader=PackageLoader("pipeline.report", "templates"), autoescape=select_autoescape(["html"]))
     env.filters["fmt"] = _fmt
     tpl = env.get_template("report.html")
     return tpl.render(s=ctx.summary, cfg=ctx.lc.cfg, figs=figs, finding_figs=finding_figs, params=params,
                       final_params=final_params, nominal_eqs=ctx.model.describe_equations(),
-                      final_eqs=diag.final.model.describe_equations(), log=ctx.rec.log)
+                      final_eqs=diag.final.model.describe_equations(), log=ctx.rec.log,
+                      structure_rows=structure_rows)

@@ -122,3 +122,34 @@ def ellipses(fit, max_pairs: int = 6) -> str | None:
     fig.suptitle("95 % confidence ellipses (χ²₂ = 5.991)", fontsize=9)
     fig.tight_layout()
     return _png(fig)
+
+
+def err_chart(frols: dict) -> str:
+    """ERR of each selected term (FROLS), in selection order, with the cumulative sum."""
+    names, err = frols["names"], np.asarray(frols["err"], float)
+    fig, ax = plt.subplots(1, 1, figsize=(7, 2.6))
+    x = np.arange(len(names))
+    ax.bar(x, 100 * err, color="tab:blue")
+    ax.plot(x, 100 * np.cumsum(err), "k.-", lw=0.8, label="cumulative")
+    ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("ERR [%]")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.set_title(f"ERR of the selected terms ({frols['n_candidates']} candidates, stop: {frols['criterion']})",
+                 fontsize=9)
+    return _png(fig)
+
+
+def ts_memberships(ts: dict) -> str:
+    """Normalised Takagi–Sugeno memberships over the first premise input."""
+    grid = np.asarray(ts["grid"])
+    c = np.asarray(ts["centres"])[:, 0]
+    s = np.asarray(ts["sigmas"])[:, 0]
+    beta = np.exp(-((grid[:, None] - c[None, :]) / s[None, :]) ** 2)
+    w = beta / beta.sum(axis=1, keepdims=True)
+    fig, ax = plt.subplots(1, 1, figsize=(7, 2.4))
+    ax.plot(grid, w, lw=1)
+    ax.set_xlabel(ts["inputs"][0])
+    ax.set_ylabel("normalised membership")
+    ax.set_title(f"Takagi–Sugeno: {ts['rules']} rules chosen by blocked CV from {ts['candidates']}", fontsize=9)
+    return _png(fig)
