@@ -229,6 +229,7 @@ def _fit_laplace(phi, y, *, sigma, **_):
 
 
 def _fit_student_t(phi, y, *, nu, sigma, theta0, **_):
+    """Student-t ML: ECM for (θ, s) at fixed ν and a bounded profile search over ν (no Nelder–Mead)."""
     n, p = phi.shape
     th0 = np.asarray(theta0, dtype=float) if theta0 is not None else np.linalg.lstsq(phi, y, rcond=None)[0]
     e0 = y - phi @ th0
@@ -253,11 +254,41 @@ def _fit_student_t(phi, y, *, nu, sigma, theta0, **_):
             - (v + 1) / 2 * np.sum(np.log1p(r * r / v))
         return -float(ll)
 
-    x0 = list(th0) + ([math.log(s0)] if est_s else []) + ([math.log(5.0)] if est_nu else [])
-    res = _minimise(nll, np.array(x0))
-    th, ls, lnu = unpack(res.x)
-    cov_full = _inv_info(nll, res.x)
-    return Estimate(th, None if cov_full is None else cov_full[:p, :p], y - phi @ th, -float(res.fun),
+    def em(v, th, s, iters=200):
+        """ECM for the t regression at fixed ν (Lange, Little & Taylor 1989): weights
+        w = (ν+1)/(ν + r²/s²), θ by weighted LS, s² = Σ w r²/N; the likelihood never decreases."""
+        for _ in range(iters):
+            r = y - phi @ th
+            w = (v + 1) / (v + (r / s) ** 2)
+            sw = np.sqrt(w)
+            th_new = np.linalg.lstsq(phi * sw[:, None], y * sw, rcond=None)[0]
+            r = y - phi @ th_new
+            s_new = math.sqrt(max(float(np.sum(w * r * r)) / n, 1e-300)) if est_s else s
+            done = np.allclose(th_new, th, rtol=1e-10, atol=1e-13) and abs(s_new - s) <= 1e-10 * s
+            th, s = th_new, s_new
+            if done:
+                break
+        return th, s
+
+    def pack(th, s, v):
+        return np.array(list(th) + ([math.log(s)] if est_s else []) + ([math.log(v)] if est_nu else []))
+
+    state = {"th": th0, "s": s0}
+    if est_nu:
+        def profile(lnu):
+            th, s = em(math.exp(lnu), state["th"], state["s"])
+            state["th"], state["s"] = th, s
+            return nll(pack(th, s, math.exp(lnu)))
+        opt = optimize.minimize_scalar(profile, bounds=(math.log(0.2), math.log(1e4)), method="bounded",
+                                       options={"xatol": 1e-6})
+        v = math.exp(opt.x)
+    else:
+        v = nu
+    th, s = em(v, state["th"], state["s"], iters=1000)
+    x = pack(th, s, v)
+    th, ls, lnu = unpack(x)
+    cov_full = _inv_info(nll, x)
+    return Estimate(th, None if cov_full is None else cov_full[:p, :p], y - phi @ th, -float(nll(x)),
                     p + est_s + est_nu, "ml", {"density": "student_t", "scale": math.exp(ls), "nu": math.exp(lnu)})
 
 
