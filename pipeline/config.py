@@ -20,7 +20,9 @@ from .errors import ConfigError
 from .expressions import FUNCTIONS, Expr, parse
 
 FAMILIES_V1 = ("offset", "output_offset", "cubic_stiffness", "quadratic_damping", "coulomb_friction",
-               "periodic_disturbance", "input_delay")
+               "periodic_disturbance", "input_delay", "colored_noise", "heavy_tailed_noise",
+               "heteroscedastic_noise")
+NOISE_FAMILIES = ("colored_noise", "heavy_tailed_noise", "heteroscedastic_noise")
 ALL_FAMILY_IDS = (
     "offset", "output_offset", "cubic_stiffness", "quadratic_damping", "coulomb_friction",
     "static_nonlinearity", "periodic_disturbance", "input_delay", "input_saturation", "dead_zone",

@@ -90,7 +90,8 @@ def initial_state(model: Model, prob: Problem, values: dict[str, float] | None =
     return x0
 
 
-def _sim(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np.ndarray | None:
+def simulate_until(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np.ndarray | None:
+    """Free-run outputs for samples [0, stop); None if the model diverges."""
     res = simulate_states(model, prob.t[:stop], prob.U[:stop], x0, bound=prob.bound)
     if res.diverged_at is not None:
         return None
@@ -99,7 +100,7 @@ def _sim(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np.ndarray |
 
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     """Free-run outputs over the whole record; SimulationError if the model diverges."""
-    Yh = _sim(model, prob, x0, len(prob.t))
+    Yh = simulate_until(model, prob, x0, len(prob.t))
     if Yh is None:
         raise SimulationError(f"the fitted model diverges on this record (parameters {model.params})")
     return Yh
@@ -163,7 +164,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
 
     def resid(th):
         m, x0 = unpack(th)
-        Yh = _sim(m, prob, x0, stop)
+        Yh = simulate_until(m, prob, x0, stop)
         if Yh is None or not np.all(np.isfinite(Yh)):
             return penalty
         return ((yobs - Yh[est[0]:stop]) * w * sw).ravel()

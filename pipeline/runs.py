@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 from . import __version__
-from .config import FAMILIES_V1, LoadedConfig, load_config
+from .config import FAMILIES_V1, NOISE_FAMILIES, LoadedConfig, load_config
 from .errors import SimulationError
 from .data import Record, Split, apply_prefilters, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
@@ -131,7 +131,7 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
                "n_params": nominal["n_params"], "validation_rmse_sim": nominal["validation"]["rmse_sim"],
                "cv_rmse_sim": None}]
     name = "nominal"
-    for f, fit in zip(diag.findings, diag.fits[1:]):
+    for f, fit in zip([f for f in diag.findings if f["family"] not in NOISE_FAMILIES], diag.fits[1:]):
         name = f"{name}+{f['family']}"
         b = model_block(fit, prob)
         models.append({"name": name, "estimator": "output_error_ls", "bic": b["bic"], "n_params": b["n_params"],
@@ -149,7 +149,10 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
             "findings": diag.findings,
             "tests": [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
                        "passed": t.passed, "detail": t.detail, "on": "nominal model, estimation data"}
-                      for t in diag.tests],
+                      for t in diag.tests]
+                     + [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
+                         "passed": t.passed, "detail": t.detail, "on": "final model, estimation data (noise)"}
+                        for t in diag.noise_tests],
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
         },

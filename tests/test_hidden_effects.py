@@ -91,3 +91,26 @@ def test_delay_evidence_includes_crosscorrelation_lag(tmp_path):
         lag = ev["output_simulation_crosscorrelation_lag"]
         assert 0 < lag["statistic"] <= syn.truth["delay_s"] / summary["data"]["sample_time"] + 1.5
         assert lag["p_value"] < 0.01
+
+
+@pytest.mark.parametrize("kind,family", [("ar1", "colored_noise"), ("student_t", "heavy_tailed_noise"),
+                                         ("hetero", "heteroscedastic_noise")])
+def test_noise_family_end_to_end_with_report(tmp_path, kind, family):
+    """Through the whole run (config, CLI path, report): a correctly structured model with a noise
+    effect gets no structural finding and the noise family, gain on validation NLL."""
+    import yaml
+
+    from pipeline import synthetic
+    from pipeline.cli import main
+    syn = synthetic.generate("tank", "none", 7, noise=0.05, noise_kind=kind)
+    syn.to_frame().to_csv(tmp_path / "r.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(synthetic.config_for(syn, "r.csv", seed=7)))
+    assert main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
+    import json
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    fams = [f["family"] for f in s["diagnosis"]["findings"]]
+    assert fams[0] == family, fams
+    f = s["diagnosis"]["findings"][0]
+    assert f["gain"]["metric"] == "validation_nll" and f["gain"]["ci95"][0] > 0
+    assert any(t["on"].endswith("(noise)") for t in s["diagnosis"]["tests"])
+    assert family in (tmp_path / "run" / "report.html").read_text()

@@ -29,7 +29,9 @@ from ..fit import FitResult, Problem, fit_output_error
 from ..model import Model, rhs_vectorized, term_values
 from ..simulate import outputs, simulate_states
 from . import stats
+from ..config import NOISE_FAMILIES
 from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
+from .noise import diagnose_noise
 
 
 @dataclass
@@ -54,6 +56,7 @@ class Diagnosis:
     tests: list[stats.TestResult]
     history: list[dict]          # every hypothesis tested, per iteration (for the report)
     fits: list[FitResult]        # nominal, then each accepted extension
+    noise_tests: list[stats.TestResult] = field(default_factory=list)
 
 
 def _log(msg: str) -> None:
@@ -344,7 +347,13 @@ class Diagnoser:
             findings.append(self.finding(best))
             current = best.fit
             fits.append(current)
-        return Diagnosis(nominal, current, findings, tests0, history, fits)
+        noise_tests = []
+        noise_fams = [f for f in self.families if f in NOISE_FAMILIES]
+        if noise_fams and len(findings) < self.max_findings:
+            _log("noise families on the final model: " + ", ".join(noise_fams))
+            nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed, n_boot=self.n_boot)
+            findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
+        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests)
 
     def finding(self, c: Candidate) -> dict:
         h, fit = c.hyp, c.fit
