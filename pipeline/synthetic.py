@@ -189,15 +189,34 @@ def config_for(syn: Synthetic, data_path: str, *, name: str | None = None, seed:
             "diagnose": {"families": "all", "alpha": 0.01, "max_findings": max_findings}}
 
 
+def course_project(dt: float = 0.05, duration: float = 100.0):
+    """The course project's Problem 2 system (seed 000): x' = −x³ + 0.8 tanh x + 1.2/(1 + x²) + u,
+    u = 2.5 sin t + 0.1 sin 0.2t + 0.5 sin 0.3t, x(0) = 0, integrated with solve_ivp (rtol 1e-10)."""
+    import pandas as pd
+    from scipy.integrate import solve_ivp
+    t = np.arange(0.0, duration + dt / 2, dt)
+
+    def u(tt):
+        return 2.5 * np.sin(tt) + 0.1 * np.sin(0.2 * tt) + 0.5 * np.sin(0.3 * tt)
+
+    sol = solve_ivp(lambda tt, x: -x ** 3 + 0.8 * np.tanh(x) + 1.2 / (1 + x ** 2) + u(tt), (0.0, t[-1]), [0.0],
+                    t_eval=t, rtol=1e-10, atol=1e-12, max_step=dt)
+    return pd.DataFrame({"t": t, "u": u(t), "x": sol.y[0]})
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("system", choices=list(BASE))
+    ap.add_argument("system", choices=list(BASE) + ["course_project"])
     ap.add_argument("effect", choices=list(EFFECTS))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--n", type=int, default=3000)
     ap.add_argument("--noise", type=float, default=0.02)
     ap.add_argument("--csv", required=True)
     a = ap.parse_args(argv)
+    if a.system == "course_project":
+        course_project().to_csv(a.csv, index=False, float_format="%.10g")
+        print(f"wrote {a.csv}: course project Problem 2 (x' = -x^3 + 0.8 tanh x + 1.2/(1+x^2) + u)")
+        return
     syn = generate(a.system, a.effect, a.seed, n=a.n, noise=a.noise)
     syn.to_frame().to_csv(a.csv, index=False, float_format="%.10g")
     print(f"wrote {a.csv}: {a.system} with hidden {a.effect} {syn.truth}")
