@@ -193,6 +193,9 @@ class Comparer:
             e = fit(self.est_rows)
             r.theta = np.asarray(getattr(e, "theta_full", e.theta), float)
             r.std = None if e.cov is None else np.sqrt(np.clip(np.diag(e.cov), 0, None))
+            if est == "rls" and getattr(e, "extra", None) and "theta_trajectory" in e.extra:
+                r.extra["theta_trajectory"] = np.asarray(e.extra["theta_trajectory"])
+                r.extra["t"] = self.rec.t[self.est_rows]
             m, r.equation = self.sim_model(getattr(e, "terms", terms), np.asarray(e.theta, float),
                                            getattr(e, "values", None))
             if fitter is not None:

@@ -71,6 +71,17 @@ class FitResult:
     def n_params(self) -> int:
         return len(self.theta)
 
+    def as_estimate(self):
+        """The shared estimator result (pipeline.estimators.Estimate) for this output-error fit;
+        log-likelihood under white Gaussian output noise with σ̂² = SSE/N (weighted units)."""
+        from .estimators import Estimate
+        r = (self.resid_est * 1.0).ravel()
+        n = r.size
+        s2 = self.sse_w / n
+        loglik = -0.5 * n * (np.log(2 * np.pi * s2) + 1.0)
+        return Estimate(self.theta, self.cov, r, float(loglik), self.n_params, "output_error_ls",
+                        {"names": list(self.names), "converged": self.success})
+
 
 def initial_state(model: Model, prob: Problem, values: dict[str, float] | None = None) -> np.ndarray:
     """Resolve the initial state at sample 0: numbers, "data" (first measured sample) or estimates."""

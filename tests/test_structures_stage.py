@@ -116,6 +116,7 @@ def _cfg(tmp_path, **extra):
     ({"structures": {"equation": "x", "candidates": {"A": ["x"]}}, "estimators": ["ols"]}, "unknown estimator 'ols'"),
     ({"prefilter": [{"name": "lowpass", "params": {"cutoff": 40.0}}]}, "prefilter[0]"),
     ({"prefilter": [{"name": "bandstop"}]}, "prefilter.0.name"),
+    ({"structures": {"equation": "x", "library": {}}}, "empty library"),
 ])
 def test_bad_structure_and_prefilter_config(tmp_path, capsys, extra, message):
     path = _cfg(tmp_path, **extra)
@@ -155,3 +156,26 @@ def test_prefilter_is_applied_logged_and_reported(tmp_path):
     assert log[0]["name"] == "lowpass" and log[0]["signals"] == ["x"] and log[0]["params"]["cutoff"] == 2.0
     from pipeline.report import render_report
     assert "Prefilter" in render_report(ctx)
+
+
+def test_rls_trajectories_reach_the_report(course_project):
+    d, s = course_project
+    import contextlib as _c
+    with _c.redirect_stderr(io.StringIO()):
+        ctx = analyse(load_config(d / "kar.yaml"))
+    rls = [r for r in ctx.comparison.results if r.estimator == "rls" and r.name == "M3"][0]
+    th = rls.extra["theta_trajectory"]
+    assert th.shape[1] == 3 and np.allclose(th[-1], [-1.0, 0.8, 1.2], atol=0.05)
+    from pipeline.report import render_report
+    assert "RLS parameter trajectories" in render_report(ctx)
+
+
+def test_output_error_fit_shares_the_estimate_interface():
+    from pipeline.data import Split
+    from pipeline.fit import Problem, fit_output_error
+    from pipeline.synthetic import _nominal, generate
+    syn = generate("tank", "none", 0)
+    prob = Problem(syn.t, syn.u[:, None], syn.y[:, None], ["h"], Split((0, 2100), (2100, 3000)), bound=1e6)
+    est = fit_output_error(_nominal("tank"), prob).as_estimate()
+    assert est.name == "output_error_ls" and est.n_params == 2 and est.cov.shape == (2, 2)
+    assert est.theta == pytest.approx([0.5, 1.0], rel=0.01) and est.loglik is not None

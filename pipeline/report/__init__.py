@@ -44,6 +44,9 @@ def render_report(ctx) -> str:
     if st:
         figs["err"] = figures.err_chart(st["frols"]) if st.get("frols") else None
         figs["ts"] = figures.ts_memberships(st["takagi_sugeno"]) if st.get("takagi_sugeno") else None
+        rls = [r for r in ctx.comparison.results if "theta_trajectory" in r.extra]
+        best = [r for r in rls if r.name == st.get("selected")] or rls
+        figs["rls"] = figures.rls_trajectories(best[0]) if best else None
     structure_rows = [m for m in ctx.summary["models"] if "cv_rmse_one_step" in m]
     structure_rows.sort(key=lambda m: (m["cv_mean"] is None, m["cv_mean"] if m["cv_mean"] is not None else 0))
     env = Environment(loader=PackageLoader("pipeline.report", "templates"), autoescape=select_autoescape(["html"]))

@@ -153,3 +153,19 @@ def ts_memberships(ts: dict) -> str:
     ax.set_ylabel("normalised membership")
     ax.set_title(f"Takagi–Sugeno: {ts['rules']} rules chosen by blocked CV from {ts['candidates']}", fontsize=9)
     return _png(fig)
+
+
+def rls_trajectories(res) -> str:
+    """RLS parameter trajectories θ̂_k of one structure (a drifting or jumping parameter shows here)."""
+    th = res.extra["theta_trajectory"]
+    fig, ax = plt.subplots(1, 1, figsize=(8, 2.6))
+    for j, name in enumerate(res.terms):
+        ax.plot(res.extra["t"], th[:, j], lw=0.8, label=name)
+    ax.set_xlabel("time [s] (estimation data)")
+    ax.set_ylabel("θ̂")
+    lim = np.percentile(np.abs(th[len(th) // 10:]), 99.5) * 1.5 if len(th) > 10 else None
+    if lim and np.isfinite(lim) and lim > 0:
+        ax.set_ylim(-lim, lim)
+    ax.legend(fontsize=7, ncol=min(4, len(res.terms)))
+    ax.set_title(f"RLS parameter trajectories, structure {res.name}", fontsize=9)
+    return _png(fig)
