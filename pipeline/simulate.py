@@ -3,7 +3,9 @@
 Fixed-step classical RK4 (``model.substeps`` steps per sample interval). Between samples the input is
 held (``zoh``) or linearly interpolated (``foh``), as MATLAB's InterSample. The right-hand side is
 generated from the checked expressions as Python source, written to a per-structure module in a cache
-folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate refits run in threads): one compile per model *structure* and machine, reused
+folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate refits run in threads) and
+``error_model='numpy'`` (a division by zero gives inf/nan, caught as divergence, instead of a check per
+division): one compile per model *structure* and machine, reused
 across processes. Extension terms are a table evaluated inside the same kernel, so refitting a
 candidate extension never recompiles. Divergence (non-finite or beyond ``bound``) stops the loop and is
 reported with its sample index; a fixed-step loop cannot hang.
@@ -30,7 +32,7 @@ _TEMPLATE = '''\
 import numpy as np
 from numba import njit
 
-@njit(cache=True, fastmath=False, nogil=True, inline="always")
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
 def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
 {unpack}
 {assign}
@@ -55,7 +57,7 @@ def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
         dx[k_eq[j]] += p[k_pc[j]] * val
 
 
-@njit(cache=True, fastmath=False, nogil=True)
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf, bound, X):
     n = U.shape[0]
     nx = x0.shape[0]
@@ -69,24 +71,25 @@ def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf
     ua = np.empty(nu)
     um = np.empty(nu)
     ub = np.empty(nu)
+    du = np.zeros(nu)
     h = dt / nsub
     for k in range(n):
         for i in range(nx):
             X[k, i] = xs[i]
         if k == n - 1:
             break
+        if foh:
+            for i in range(nu):
+                du[i] = U[k + 1, i] - U[k, i]
         for s in range(nsub):
             t = t0 + k * dt + s * h
+            fa = s / nsub
+            fm = (s + 0.5) / nsub
+            fb = (s + 1.0) / nsub
             for i in range(nu):
-                if foh:
-                    du = U[k + 1, i] - U[k, i]
-                    ua[i] = U[k, i] + du * (s / nsub)
-                    um[i] = U[k, i] + du * ((s + 0.5) / nsub)
-                    ub[i] = U[k, i] + du * ((s + 1.0) / nsub)
-                else:
-                    ua[i] = U[k, i]
-                    um[i] = U[k, i]
-                    ub[i] = U[k, i]
+                ua[i] = U[k, i] + du[i] * fa
+                um[i] = U[k, i] + du[i] * fm
+                ub[i] = U[k, i] + du[i] * fb
             rhs(xs, ua, t, p, k1, k_eq, k_kind, k_var, k_pow, k_pc, k_pf)
             for i in range(nx):
                 tmp[i] = xs[i] + 0.5 * h * k1[i]
