@@ -67,6 +67,9 @@ class SplitCfg(_Strict):
     validation_fraction: float = Field(default=0.3, gt=0, lt=1)
     estimation: tuple[int, int | None] | None = None
     validation: tuple[int, int | None] | None = None
+    # fitting simulations start this many samples before the estimation part (from the configured
+    # initial state) instead of at sample 0; reported errors always use the simulation from sample 0
+    warmup: int | None = Field(default=None, ge=0)
 
 
 class DiagnoseCfg(_Strict):
@@ -284,6 +287,11 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     if (s.estimation is None) != (s.validation is None):
         raise ConfigError("give both split.estimation and split.validation, or neither",
                           file=f, key="split")
+    if s.warmup is not None:
+        init = m.initial if isinstance(m.initial, dict) else {st: m.initial for st in m.states}
+        if any(v == "estimate" for v in init.values()):
+            raise ConfigError("split.warmup cannot be combined with initial states to 'estimate' (the state at "
+                              "the warm-up start would be ambiguous); give numbers or 'data'", file=f, key="split.warmup")
     for key in ("estimation", "validation"):
         rng = getattr(s, key)
         if rng is not None and (rng[0] < 0 or (rng[1] is not None and rng[1] <= rng[0])):

@@ -36,13 +36,15 @@ class Problem:
     out_names: list[str]
     split: Split
     bound: float
+    sim_start: int = 0            # fitting simulations start here (split.warmup), not at sample 0
 
     @classmethod
-    def from_record(cls, rec: Record, model: Model, split: Split) -> "Problem":
+    def from_record(cls, rec: Record, model: Model, split: Split, warmup: int | None = None) -> "Problem":
         names = list(rec.outputs)
         Y = np.column_stack([rec.outputs[k] for k in names])
         scale = max(1.0, float(np.max(np.abs(Y))))
-        return cls(rec.t, rec.u_matrix(list(model.inputs)), Y, names, split, bound=1e6 * scale)
+        start = 0 if warmup is None else max(0, split.est[0] - warmup)
+        return cls(rec.t, rec.u_matrix(list(model.inputs)), Y, names, split, bound=1e6 * scale, sim_start=start)
 
     @property
     def weights(self) -> np.ndarray:
@@ -83,8 +85,9 @@ class FitResult:
                         {"names": list(self.names), "converged": self.success})
 
 
-def initial_state(model: Model, prob: Problem, values: dict[str, float] | None = None) -> np.ndarray:
-    """Resolve the initial state at sample 0: numbers, "data" (first measured sample) or estimates."""
+def initial_state(model: Model, prob: Problem, values: dict[str, float] | None = None, at: int = 0) -> np.ndarray:
+    """Resolve the initial state at sample ``at`` (0: the record start): numbers, "data" (the measured
+    sample there) or estimates."""
     x0 = np.zeros(len(model.states))
     for i, s in enumerate(model.states):
         spec = model.initial[s]
@@ -92,7 +95,7 @@ def initial_state(model: Model, prob: Problem, values: dict[str, float] | None =
             x0[i] = values[f"x0.{s}"]
         elif spec == "data" or spec == "estimate":
             if s in prob.out_names:
-                x0[i] = prob.Y[0, prob.out_names.index(s)]
+                x0[i] = prob.Y[at, prob.out_names.index(s)]
             elif spec == "data":
                 raise ConfigError(f"initial state 'data' needs state {s!r} to be measured",
                                   key=f"model.initial.{s}")
@@ -102,16 +105,28 @@ def initial_state(model: Model, prob: Problem, values: dict[str, float] | None =
 
 
 def simulate_until(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np.ndarray | None:
-    """Free-run outputs for samples [0, stop); None if the model diverges."""
-    res = simulate_states(model, prob.t[:stop], prob.U[:stop], x0, bound=prob.bound)
+    """Free-run outputs for samples [0, stop) (x0 at sample 0); None if the model diverges. With a
+    warm-up (``prob.sim_start`` > 0) the simulation starts there from the configured initial state
+    and the rows before it are NaN."""
+    a = prob.sim_start
+    if a > 0:
+        x0 = initial_state(model, prob, at=a)
+    res = simulate_states(model, prob.t[a:stop], prob.U[a:stop], x0, bound=prob.bound)
     if res.diverged_at is not None:
         return None
-    return outputs(model, prob.t[:stop], prob.U[:stop], res.X, prob.out_names)
+    Y = outputs(model, prob.t[a:stop], prob.U[a:stop], res.X, prob.out_names)
+    if a == 0:
+        return Y
+    full = np.full((stop, Y.shape[1]), np.nan)
+    full[a:] = Y
+    return full
 
 
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
-    """Free-run outputs over the whole record; SimulationError if the model diverges."""
-    Yh = simulate_until(model, prob, x0, len(prob.t))
+    """Free-run outputs over the whole record from sample 0 (x0), never from a warm-up start: these are
+    the reported numbers. SimulationError if the model diverges."""
+    res = simulate_states(model, prob.t, prob.U, x0, bound=prob.bound)
+    Yh = None if res.diverged_at is not None else outputs(model, prob.t, prob.U, res.X, prob.out_names)
     if Yh is None:
         raise SimulationError(f"the fitted model diverges on this record (parameters {model.params})")
     return Yh
@@ -176,7 +191,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     def resid(th):
         m, x0 = unpack(th)
         Yh = simulate_until(m, prob, x0, stop)
-        if Yh is None or not np.all(np.isfinite(Yh)):
+        if Yh is None or not np.all(np.isfinite(Yh[est[0]:stop])):
             return penalty
         return ((yobs - Yh[est[0]:stop]) * w * sw).ravel()
 

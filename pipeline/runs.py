@@ -96,7 +96,7 @@ def analyse(lc: LoadedConfig) -> RunContext:
     if lc.cfg.data.remove_mean:
         remove_means(rec, split)
     model = Model.from_config(lc)
-    prob = Problem.from_record(rec, model, split)
+    prob = Problem.from_record(rec, model, split, lc.cfg.split.warmup)
     d = lc.cfg.diagnose
     dg = Diagnoser(prob, alpha=d.alpha, families=families_of(lc), max_findings=d.max_findings,
                    seed=lc.cfg.seed, n_boot=d.bootstrap, max_delay_s=d.max_delay_s, dt=rec.dt)

@@ -87,3 +87,24 @@ def test_holm_step_down():
     out = stats.holm({"a": 0.001, "b": 0.015, "c": 0.03, "d": 0.5}, 0.05)
     # 0.001 ≤ .05/4; 0.015 ≤ .05/3; 0.03 > .05/2 → stop
     assert out == {"a": True, "b": True, "c": False, "d": False}
+
+
+def test_hac_fft_path_equals_the_lag_loop():
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(0)
+    g = lfilter([1], [1, -0.95], rng.standard_normal((5000, 2)), axis=0)
+    L = 40
+    ref = g.T @ g
+    for lag in range(1, L + 1):
+        gam = g[lag:].T @ g[:-lag]
+        ref += (1 - lag / (L + 1)) * (gam + gam.T)
+    np.testing.assert_allclose(stats.long_run_variance(g, L), ref, rtol=1e-12)
+
+
+def test_crosscorr_equals_direct_sum_at_negative_and_positive_lags():
+    rng = np.random.default_rng(1)
+    e, u = rng.standard_normal(1001), rng.standard_normal(1001)
+    lags, c, _ = stats.crosscorr(e, u, 10)
+    ec, uc = e - e.mean(), u - u.mean()
+    ref = [np.dot(ec[k:], uc[:len(uc) - k]) if k >= 0 else np.dot(ec[:k], uc[-k:]) for k in lags]
+    np.testing.assert_allclose(c, np.array(ref) / 1001 / np.sqrt(np.var(e) * np.var(u)), atol=1e-14)

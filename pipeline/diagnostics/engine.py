@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import criteria
-from ..fit import FitResult, Problem, fit_output_error
+from ..fit import FitResult, Problem, fit_output_error, simulate_until
 from ..model import Model, rhs_vectorized, term_values
 from ..simulate import outputs, simulate_states
 from . import stats
@@ -124,12 +124,8 @@ class Diagnoser:
 
     # -- sensitivities -------------------------------------------------------------------------
     def _sim_est(self, model: Model, x0: np.ndarray) -> np.ndarray | None:
-        stop = self.prob.split.est[1]
-        res = simulate_states(model, self.prob.t[:stop], self.prob.U[:stop], x0, bound=self.prob.bound)
-        if res.diverged_at is not None:
-            return None
-        Y = outputs(model, self.prob.t[:stop], self.prob.U[:stop], res.X, self.prob.out_names)
-        return Y[self.prob.split.est[0]:]
+        Y = simulate_until(model, self.prob, x0, self.prob.split.est[1])
+        return None if Y is None else Y[self.prob.split.est[0]:]
 
     def _step(self, fit: FitResult, hyp: Hypothesis, coef: str) -> float:
         term = next((t for t in hyp.terms if t.coef == coef), None)

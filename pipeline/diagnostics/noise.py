@@ -195,7 +195,7 @@ class _Sim:
     def resid(self, th):
         m, x0 = self.unpack(th)
         Yh = simulate_until(m, self.prob, x0, self.est[1])
-        if Yh is None or not np.all(np.isfinite(Yh)):
+        if Yh is None or not np.all(np.isfinite(Yh[self.est[0]:self.est[1]])):
             return None
         return self.prob.Y[self.est[0]:self.est[1], 0] - Yh[self.est[0]:, 0]
 

@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import stats
+from scipy.fft import next_fast_len
 from scipy.special import gammaln
 
 
@@ -32,11 +33,17 @@ class TestResult:
         return asdict(self)
 
 
+def _fast_len(n: int) -> int:
+    """FFT length >= n with small prime factors (a length with a large prime factor is slow)."""
+    return next_fast_len(n, real=True)
+
+
 def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
     x = x - x.mean()
     n = len(x)
-    f = np.fft.rfft(x, 2 * n)
-    r = np.fft.irfft(f * np.conj(f))[: nlags + 1] / n
+    m = _fast_len(2 * n)
+    f = np.fft.rfft(x, m)
+    r = np.fft.irfft(f * np.conj(f), m)[: nlags + 1] / n
     return r
 
 
@@ -58,9 +65,10 @@ def crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, level: float = 0.99
     n = len(e)
     nlags = _lags(n, nlags)
     e0, u0 = e - e.mean(), u - u.mean()
-    f = np.fft.irfft(np.fft.rfft(e0, 2 * n) * np.conj(np.fft.rfft(u0, 2 * n)))
+    mlen = _fast_len(2 * n)
+    f = np.fft.irfft(np.fft.rfft(e0, mlen) * np.conj(np.fft.rfft(u0, mlen)), mlen)
     lags = np.arange(-nlags, nlags + 1)
-    c = np.array([f[k] if k >= 0 else f[2 * n + k] for k in lags]) / n
+    c = f[lags] / n  # negative lags wrap around (f is circular with zero padding >= n)
     c = c / math.sqrt(np.dot(e0, e0) / n * np.dot(u0, u0) / n)
     m = min(n - 1, 200)
     re, ru = _acf(e0, m), _acf(u0, m)
@@ -128,9 +136,24 @@ def long_run_variance(g: np.ndarray, lags: int | None = None) -> np.ndarray:
     g = np.atleast_2d(g.T).T
     L = andrews_bandwidth(g) if lags is None else lags
     om = g.T @ g
-    for lag in range(1, L + 1):
-        gam = g[lag:].T @ g[:-lag]
-        om += (1 - lag / (L + 1)) * (gam + gam.T)
+    if L == 0:
+        return om
+    n, q = g.shape
+    if L <= 8:
+        for lag in range(1, L + 1):
+            gam = g[lag:].T @ g[:-lag]
+            om += (1 - lag / (L + 1)) * (gam + gam.T)
+        return om
+    # all lags at once: Γ_l[a, b] = Σ_t g[t+l, a] g[t, b] from FFT cross-correlations, O(q² N log N)
+    m = _fast_len(2 * n)
+    F = np.fft.rfft(g, m, axis=0)
+    w = 1.0 - np.arange(1, L + 1) / (L + 1)
+    for a in range(q):
+        for b in range(q):
+            c = np.fft.irfft(F[:, a] * np.conj(F[:, b]), m)[1:L + 1]
+            v = float(np.dot(w, c))
+            om[a, b] += v
+            om[b, a] += v
     return om
 
 
