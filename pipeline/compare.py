@@ -33,6 +33,7 @@ from .expressions import parse, vectorize
 from .model import Model
 from .prefilter import derivative
 from .selection import blocked_folds
+from .jsonutil import clean as _clean
 from .simulate import outputs, simulate_states
 
 
@@ -331,7 +332,7 @@ class Comparer:
                             fitter=_TSWrap(fitter))
         ts = fitter(rows).ts
         grid = np.linspace(Uall[rows, 0].min(), Uall[rows, 0].max(), 200)
-        info = {"inputs": ins, "rules": K, "candidates": rules, "selection": _jsonable(sel),
+        info = {"inputs": ins, "rules": K, "candidates": rules, "selection": _clean(sel),
                 "centres": ts.centres.tolist(), "sigmas": np.broadcast_to(ts.sigmas, ts.centres.shape).tolist(),
                 "theta": ts.theta.tolist(), "rule_text": ts.rules(), "grid": grid.tolist()}
         return info, res
@@ -371,15 +372,3 @@ def _ts_expression(ts, ins: list[str]) -> tuple[str, dict[str, float]]:
         betas.append(b)
         num.append(f"{b}*({' + '.join(lin)})")
     return f"(({' + '.join(num)})/({' + '.join(betas)}))", vals
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    return x if isinstance(x, (int, float, str, bool)) or x is None else str(x)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import platform
 import shutil
@@ -26,6 +25,8 @@ import numpy as np
 import yaml
 
 from . import __version__
+from .jsonutil import clean as _clean
+from .jsonutil import dumps
 from .config import FAMILIES_V1, NOISE_FAMILIES, LoadedConfig, load_config
 from .errors import SimulationError
 from .data import Record, Split, apply_prefilters, load_record, make_split, remove_means
@@ -47,30 +48,6 @@ class RunContext:
     run_id: str
     summary: dict
     comparison: object = None
-
-
-def _clean(x):
-    """JSON-ready copy: numpy → Python, floats rounded to 10 significant digits, NaN/inf → None."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_clean(v) for v in x.tolist()]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        if not math.isfinite(v):
-            return None
-        return float(f"{v:.10g}")
-    return x
-
-
-def dumps(obj) -> str:
-    return json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n"
 
 
 def model_block(fit: FitResult, prob: Problem) -> dict:
