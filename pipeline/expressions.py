@@ -111,6 +111,11 @@ def to_source(expr: Expr | ast.expr, rename: dict[str, str] | None = None, *, sc
         if isinstance(n, ast.Name):
             return rename.get(n.id, n.id)
         if isinstance(n, ast.BinOp):
+            r = n.right
+            if (isinstance(n.op, ast.Pow) and isinstance(r, ast.Constant) and float(r.value).is_integer()
+                    and abs(r.value) <= 16):
+                # integer exponent: numba/numpy use repeated multiplication instead of pow()
+                return f"({gen(n.left)} ** {int(r.value)})"
             return f"({gen(n.left)} {_BINOPS[type(n.op)]} {gen(n.right)})"
         if isinstance(n, ast.UnaryOp):
             return f"({'-' if isinstance(n.op, ast.USub) else '+'}{gen(n.operand)})"
