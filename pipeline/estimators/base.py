@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
+from scipy.linalg import lapack
 
 from pipeline.errors import EstimationError
 
@@ -22,6 +23,7 @@ __all__ = [
     "as_regressors",
     "as_target",
     "numerical_rank",
+    "augmented_r",
     "numerical_hessian",
     "gaussian_loglik",
 ]
@@ -90,17 +92,51 @@ def as_target(target) -> np.ndarray:
     return y
 
 
-def numerical_rank(phi: np.ndarray, rtol: float | None = None) -> tuple[int, np.ndarray, np.ndarray, float]:
+def numerical_rank(phi: np.ndarray, rtol: float | None = None, *,
+                   n_rows: int | None = None) -> tuple[int, np.ndarray, np.ndarray, float]:
     """Numerical rank via the SVD. Singular values s_i <= tol are treated as zero, with
     tol = rtol · s_max and by default rtol = max(N, p) · machine epsilon (the LAPACK/NumPy convention).
-    Returns (rank, singular values, V (p×p, rows of Vᵀ as columns), tol)."""
+    Returns (rank, singular values, V (p×p, rows of Vᵀ as columns), tol).
+
+    ``phi`` may be the p×p triangular factor R of a QR decomposition Φ = QR of the N×p regressor
+    matrix, with ``n_rows=N``: Q has orthonormal columns, so ΦᵀΦ = RᵀR and Φ, R share their singular
+    values and right singular vectors (Golub & Van Loan, Matrix Computations, 4th ed., §5.4.1,
+    R-SVD); the SVD then costs O(p³) instead of O(Np²), and the default tolerance is still
+    max(N, p)·eps·s_max of Φ."""
     # full V is needed for the null space when N < p; otherwise the thin SVD (never an N×N U)
     _, s, vt = np.linalg.svd(phi, full_matrices=phi.shape[0] < phi.shape[1])
     if rtol is None:
-        rtol = max(phi.shape) * np.finfo(float).eps
+        rows = phi.shape[0] if n_rows is None else int(n_rows)
+        rtol = max(rows, phi.shape[1]) * np.finfo(float).eps
     tol = float(rtol * (s[0] if s.size else 0.0))
     rank = int(np.sum(s > tol))
     return rank, s, vt.T, tol
+
+
+def augmented_r(phi: np.ndarray, y: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """Upper-triangular factor R of the Householder QR [Φ | y] = Q R, without forming Q.
+
+    Rows are multiplied by ``scale`` first when given (whitening Φ·√w, y·√w for weighted LS).
+    Returns R of shape (min(N, p+1), p+1). Partitioned as R = [[R11, r12], [0, r22]] with R11 p×p:
+    Qᵀy = [r12; r22], so the LS solution of min ‖y − Φθ‖² is θ̂ = R11⁻¹r12, the residual energy is
+    SSE = r22² and ΦᵀΦ = R11ᵀR11 (Johansson (5.5)–(5.10); Golub & Van Loan, Matrix Computations,
+    4th ed., §5.3.3). One LAPACK dgeqrf on a Fortran-ordered copy of [Φ | y] that is overwritten in
+    place: no N×p matrix Q (orgqr) and no N×p matrix U of an SVD is ever built.
+    """
+    n, p = phi.shape
+    a = np.empty((n, p + 1), order="F")
+    if scale is None:
+        # a ufunc copy: its iterator blocks the C→Fortran transposition, ~3× faster than `a[:, :p] = phi`
+        np.positive(phi, out=a[:, :p])
+        a[:, p] = y
+    else:
+        np.multiply(phi, scale[:, None], out=a[:, :p])
+        np.multiply(y, scale, out=a[:, p])
+    lwork = int(lapack.dgeqrf(a, lwork=-1, overwrite_a=1)[2][0])  # workspace query, a untouched
+    qr, _, _, info = lapack.dgeqrf(a, lwork=max(lwork, 1), overwrite_a=1)
+    if info != 0:
+        raise EstimationError(f"QR factorisation failed (LAPACK dgeqrf info = {info})")
+    return np.triu(qr[: min(n, p + 1)])
 
 
 def numerical_hessian(fun, x: np.ndarray, rel_step: float = 1e-4) -> np.ndarray:

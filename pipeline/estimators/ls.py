@@ -3,7 +3,9 @@
 * LS: θ̂ = argmin ‖Y − Φθ‖², solved by QR (Johansson (5.5)–(5.10); Wrocław (2.73)–(2.81) with the
   corrected (ΣφφT)⁻¹ of misprint 10). Covariance σ̂²(ΦᵀΦ)⁻¹ with σ̂² = SSE/(N − p) (Johansson (5.36),
   and 11.3 with the corrected factor: σ̂² = εᵀε/(N − p)).
-* Rank deficiency: numerical rank from the SVD (tolerance max(N, p)·eps·s_max); the null-space basis
+* Rank deficiency: numerical rank from the SVD (tolerance max(N, p)·eps·s_max) of the triangular factor R
+  of [Φ | Y] (same singular values and right singular vectors as Φ; the SVD of Φ itself only for
+  rank-deficient or borderline Φ); the null-space basis
   (the non-identifiable parameter directions) is reported; the minimum-norm solution
   θ̂ = (ΦᵀΦ)⁺ΦᵀY = Φ⁺Y (Johansson 5.2, (5.13)–(5.16)) is returned only with ``min_norm=True``.
 * Identifiability of the noise-free static MIMO characteristic y = Θu: det(U_N) ≠ 0 and the exact
@@ -15,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from .base import Estimate, EstimationError, as_regressors, as_target, gaussian_loglik, numerical_rank
+from .base import (Estimate, EstimationError, as_regressors, as_target, augmented_r, gaussian_loglik,
+                   numerical_rank)
 
 #: relative tolerance for det(U_N) = 0: |det U| <= DET_RTOL · Π‖u_i‖ (Hadamard bound of |det U|).
 DET_RTOL = 1e-10
@@ -31,16 +34,35 @@ def _format_dirs(null: np.ndarray) -> str:
     return "; ".join(cols)
 
 
+#: the R-based rank decision is handed to the SVD of Φ itself when s_min(R) is within this factor of
+#: the tolerance (R and Φ have the same singular values only up to rounding, ~eps·s_max).
+RANK_MARGIN = 4.0
+
+
 def fit(regressors, target, *, min_norm: bool = False, rtol: float | None = None) -> Estimate:
     """Least squares (Johansson (5.5)–(5.10), covariance (5.36)); minimum-norm solution (Johansson 5.2,
     θ̂ = Φ⁺Y) when ``min_norm=True`` and Φ is rank deficient.
 
     ``rtol`` overrides the relative SVD tolerance of the numerical rank (default max(N, p)·eps).
+
+    Full-rank path: one Householder QR of the augmented matrix [Φ | Y] = Q [[R11, r12], [0, r22]]
+    keeping only R (:func:`~pipeline.estimators.base.augmented_r`); rank, singular values and null space
+    from the SVD of the p×p factor R11 (ΦᵀΦ = R11ᵀR11, so Φ and R11 have the same singular values and
+    right singular vectors), θ̂ = R11⁻¹r12 (Johansson (5.10) with QᵀY = [r12; r22]), SSE = r22² = ‖Y − Φθ̂‖²
+    and (ΦᵀΦ)⁻¹ = R11⁻¹R11⁻ᵀ. A rank-deficient (or borderline, s_min(R11) <= 4·tol) Φ, and N <= p,
+    take the SVD of Φ itself as before (error message with the non-identifiable directions, or Φ⁺Y).
     """
     y = as_target(target)
     phi = as_regressors(regressors, y.size)
     n, p = phi.shape
-    rank, s, v, tol = numerical_rank(phi, rtol)
+    r = None
+    if n > p:
+        r = augmented_r(phi, y)
+        rank, s, v, tol = numerical_rank(r[:p, :p], rtol, n_rows=n)
+        if rank < p or s[-1] <= RANK_MARGIN * tol:
+            r = None  # rank deficient or borderline: decide on the SVD of Φ itself
+    if r is None:
+        rank, s, v, tol = numerical_rank(phi, rtol)
     null = v[:, rank:]
     extra = {"rank": rank, "singular_values": s, "rank_tol": tol, "null_space": null}
     if rank < p:
@@ -54,13 +76,15 @@ def fit(regressors, target, *, min_norm: bool = False, rtol: float | None = None
         gram_pinv = pinv @ pinv.T  # (ΦᵀΦ)⁺
         extra["min_norm"] = True
     else:
-        q, r = np.linalg.qr(phi, mode="reduced")
-        theta = solve_triangular(r, q.T @ y)
-        rinv = solve_triangular(r, np.eye(p))
-        gram_pinv = rinv @ rinv.T  # (ΦᵀΦ)⁻¹
+        if r is None:  # full rank but decided on the SVD of Φ (borderline, or N == p)
+            r = augmented_r(phi, y)
+        r11 = r[:p, :p]
+        theta = solve_triangular(r11, r[:p, p])  # θ̂ = R11⁻¹ (QᵀY)[:p]
+        rinv = solve_triangular(r11, np.eye(p))
+        gram_pinv = rinv @ rinv.T  # (ΦᵀΦ)⁻¹ = R11⁻¹R11⁻ᵀ
         extra["min_norm"] = False
     resid = y - phi @ theta
-    sse = float(resid @ resid)
+    sse = float(resid @ resid)  # = r22² on the full-rank path (up to rounding)
     dof = n - rank
     extra["pinv_gram"] = gram_pinv
     extra["sse"] = sse

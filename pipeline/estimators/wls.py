@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import integrate, linalg
 
-from .base import Estimate, EstimationError, as_regressors, as_target, numerical_rank
+from .base import Estimate, EstimationError, as_regressors, as_target, augmented_r, numerical_rank
+from .ls import RANK_MARGIN
 
 
 def _check_weights(w: np.ndarray, n: int) -> np.ndarray:
@@ -30,15 +31,31 @@ def _check_weights(w: np.ndarray, n: int) -> np.ndarray:
     return w
 
 
-def _solve_whitened(phi_w: np.ndarray, y_w: np.ndarray):
-    p = phi_w.shape[1]
-    rank = numerical_rank(phi_w)[0]
-    if rank < p:
-        raise EstimationError(f"singular weighted regressors: numerical rank {rank} < {p} parameters; "
-                              "expected full column rank")
-    q, r = np.linalg.qr(phi_w, mode="reduced")
-    theta = linalg.solve_triangular(r, q.T @ y_w)
-    rinv = linalg.solve_triangular(r, np.eye(p))
+def _solve_whitened(phi: np.ndarray, y: np.ndarray, scale: np.ndarray | None = None):
+    """LS on the whitened data Φ_w = diag(scale)·Φ, y_w = diag(scale)·y (scale = √w; None: Φ, y are
+    already whitened): θ̂ = (Φ_wᵀΦ_w)⁻¹Φ_wᵀy_w = (ΦᵀWΦ)⁻¹ΦᵀWY (Johansson (5.40)).
+
+    One R-only Householder QR of [Φ_w | y_w] = Q [[R11, r12], [0, r22]]
+    (:func:`~pipeline.estimators.base.augmented_r`): the rank test uses the SVD of the p×p factor R11
+    (same singular values as Φ_w, tolerance max(N, p)·eps·s_max), θ̂ = R11⁻¹r12, the weighted residual
+    energy εᵀWε = r22² and (ΦᵀWΦ)⁻¹ = R11⁻¹R11⁻ᵀ. Returns (θ̂, (ΦᵀWΦ)⁻¹)."""
+    n, p = phi.shape
+    rank = None
+    if n > p:
+        r = augmented_r(phi, y, scale)
+        rank, s, _, tol = numerical_rank(r[:p, :p], n_rows=n)
+        if rank < p or s[-1] <= RANK_MARGIN * tol:
+            rank = None  # rank deficient or borderline: decide on the SVD of Φ_w itself (as before)
+    if rank is None:
+        phi_w = phi if scale is None else phi * scale[:, None]
+        rank = numerical_rank(phi_w)[0]
+        if rank < p:
+            raise EstimationError(f"singular weighted regressors: numerical rank {rank} < {p} parameters; "
+                                  "expected full column rank")
+        r = augmented_r(phi, y, scale)
+    r11 = r[:p, :p]
+    theta = linalg.solve_triangular(r11, r[:p, p])
+    rinv = linalg.solve_triangular(r11, np.eye(p))
     return theta, rinv @ rinv.T
 
 
@@ -87,11 +104,15 @@ def fit(regressors, target, *, weights=None, noise_cov=None, variance_model=None
             w = _check_weights(weights, n)
             scale_cov = True if scale_cov is None else scale_cov
         sw = np.sqrt(w)
-        phi_w, y_w = phi * sw[:, None], y * sw
         extra["weights"] = w
-    theta, g = _solve_whitened(phi_w, y_w)
-    resid = y - phi @ theta
-    e_w = y_w - phi_w @ theta
+    if noise_cov is not None:
+        theta, g = _solve_whitened(phi_w, y_w)
+        resid = y - phi @ theta
+        e_w = y_w - phi_w @ theta
+    else:  # whitening inside the QR copy: Φ·√w is never stored separately
+        theta, g = _solve_whitened(phi, y, sw)
+        resid = y - phi @ theta
+        e_w = resid * sw  # ε_w = √w·(Y − Φθ̂)
     wsse = float(e_w @ e_w)
     dof = n - p
     sigma2 = wsse / dof if dof > 0 else None
@@ -126,7 +147,7 @@ def _fgls_weights(phi, y, z, n_iter):
         gamma = np.linalg.lstsq(zz, np.log(e2), rcond=None)[0]
         w = np.exp(-(zz @ gamma))
         sw = np.sqrt(w)
-        theta, _ = _solve_whitened(phi * sw[:, None], y * sw)
+        theta, _ = _solve_whitened(phi, y, sw)
         est = type(est)(theta=theta, cov=None, residuals=y - phi @ theta, loglik=None, n_params=phi.shape[1],
                         name="wls")
         hist.append(theta)
