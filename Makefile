@@ -26,8 +26,16 @@ diagnose: $(STAMP)
 test: $(STAMP)
 	@$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
-bench: $(STAMP)
-	@$(BIN)/python -m pipeline.bench
+# benchmarks run in their own environment: SysIdentPy (the FROLS comparison) is installed there only
+BENCH_VENV := .venv-bench
+$(BENCH_VENV)/.installed: pyproject.toml
+	@test -x $(BENCH_VENV)/bin/python || $(PYTHON) -m venv $(BENCH_VENV)
+	@echo "installing the benchmark environment into $(BENCH_VENV) (first run only)..."
+	@$(BENCH_VENV)/bin/python -m pip install -q --disable-pip-version-check -e . sysidentpy
+	@touch $@
+
+bench: $(BENCH_VENV)/.installed
+	@$(BENCH_VENV)/bin/python -m pipeline.bench
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(BENCH_VENV) build *.egg-info .pytest_cache
