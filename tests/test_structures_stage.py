@@ -179,3 +179,19 @@ def test_output_error_fit_shares_the_estimate_interface():
     est = fit_output_error(_nominal("tank"), prob).as_estimate()
     assert est.name == "output_error_ls" and est.n_params == 2 and est.cov.shape == (2, 2)
     assert est.theta == pytest.approx([0.5, 1.0], rel=0.01) and est.loglik is not None
+
+
+@pytest.mark.parametrize("noise", [0.01, 0.03])
+def test_takagi_sugeno_on_the_course_project_cv_chooses_a_middle_k(noise):
+    """Issue 4 / wro_ex2_13 on the course project's system: with measurement noise the training error
+    falls as rules are added (2, 5, 11, 24) but blocked CV chooses neither extreme."""
+    from pipeline.prefilter import derivative
+    from pipeline.structures.takagi_sugeno import select_rules
+    from pipeline.synthetic import course_project
+    df = course_project(dt=0.05, duration=100)
+    rng = np.random.default_rng(0)
+    x = df.x.to_numpy() + noise * df.x.std() * rng.standard_normal(len(df))
+    dx, _ = derivative(x, 0.05, "savgol", window=11, polyorder=3, warn=False)
+    sel = select_rules(x[:1400, None], (dx - df.u.to_numpy())[:1400], [2, 5, 11, 24], k=10, gap=10, seed=0)
+    assert np.all(np.diff(sel["train_mse"]) < 0)
+    assert sel["chosen"] not in (2, 24)
