@@ -105,8 +105,35 @@ class Comparer:
         self.est_rows = np.arange(*split.est)
         self.all_measured = all(s in rec.outputs for s in model.states)
         self.out_names = list(rec.outputs)
+        self._check_estimators()
+        ts = self.sc.takagi_sugeno
+        for v in (ts.inputs or []) if ts else []:
+            if v not in self.data:
+                raise ConfigError(f"{v!r} is not a measured signal (measured: {sorted(self.data)})",
+                                  file=self.file, key="structures.takagi_sugeno.inputs")
         self.Y = np.column_stack([rec.outputs[k] for k in self.out_names])
         self.U = rec.u_matrix(list(model.inputs))
+
+    def _check_estimators(self) -> None:
+        """Every estimator option is a keyword of that estimator (bad names fail before any fit)."""
+        import inspect
+
+        from .estimators import ml, rls
+        source = {"rls": rls.rls}                       # rls.fit forwards **options to rls.rls
+        extra = {"map": {"prior_mean", "prior_sd"}, "mcmc": {"prior_mean", "prior_sd"}}
+        internal = {"prior", "instruments", "regressors", "target", "phi", "y"}
+        for name, opts in self.lc.cfg.estimator_list():
+            sig = inspect.signature(source.get(name, ESTIMATORS[name]))
+            allowed = ({k for k, p in sig.parameters.items() if p.kind == p.KEYWORD_ONLY or
+                        (p.kind == p.POSITIONAL_OR_KEYWORD and p.default is not p.empty)}
+                       | extra.get(name, set())) - internal
+            for k in opts:
+                if k not in allowed:
+                    raise ConfigError(f"unknown option {k!r}; {name} takes {', '.join(sorted(allowed)) or 'none'}",
+                                      file=self.file, key=f"estimators.{name}")
+            if name == "ml" and opts.get("density", "gaussian") not in ml.DENSITIES:
+                raise ConfigError(f"unknown density {opts['density']!r}; expected one of {', '.join(ml.DENSITIES)}",
+                                  file=self.file, key="estimators.ml.density")
 
     # -- helpers -----------------------------------------------------------------------------------
     def _eval(self, expr, rows=None) -> np.ndarray:
@@ -292,13 +319,11 @@ class Comparer:
     def run_sindy(self) -> dict:
         from .structures import library as L
         from .structures.sindy import fit_sindy
-        cfg = dict(self.sc.sindy)
-        terms = cfg.get("terms")
-        lib = L.from_terms(terms) if terms else L.poly([self.eq], 3)
-        thr = cfg.get("threshold", [0.01, 0.05, 0.1, 0.5])
+        cfg = self.sc.sindy
+        lib = L.from_terms(cfg.terms) if cfg.terms else L.poly([self.eq], 3)
         rows = self.est_rows
         m = fit_sindy({k: v[rows] for k, v in self.data.items()}, [self.eq], lib, self.rec.t[rows], inputs=[],
-                      optimizer=str(cfg.get("optimizer", "stlsq")), threshold=thr, x_dot=self.target[rows][:, None],
+                      optimizer=cfg.optimizer, threshold=cfg.threshold, x_dot=self.target[rows][:, None],
                       seed=self.lc.cfg.seed)
         active = [n for n, c in zip(lib.names, m.coef[0]) if c != 0]
         return {"equations": m.equations(), "terms": active, "threshold": m.threshold, "optimizer": m.optimizer,
@@ -307,10 +332,10 @@ class Comparer:
 
     def run_takagi_sugeno(self):
         from .structures.takagi_sugeno import fit_takagi_sugeno, select_rules
-        cfg = dict(self.sc.takagi_sugeno)
-        ins = list(cfg.get("inputs", [self.eq]))
-        rules = [int(k) for k in cfg.get("rules", [2, 5, 11])]
-        method = str(cfg.get("method", "global"))
+        cfg = self.sc.takagi_sugeno
+        ins = list(cfg.inputs or [self.eq])
+        rules = list(cfg.rules)
+        method = cfg.method
         Uall = np.column_stack([self.data[v] for v in ins])
         rows = self.est_rows
         sel = select_rules(Uall[rows], self.target[rows], rules, k=self.sc.cv_folds, gap=self.sc.cv_gap,

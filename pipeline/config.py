@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Literal, Union
+from typing import Annotated, Literal, Union
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -118,6 +118,23 @@ class LibraryCfg(_Strict):
     criterion: Literal["bic", "aic", "aicc", "fpe"] = "bic"
 
 
+class SindyCfg(_Strict):
+    """SINDy on the unknown part of the equation (pipeline.structures.sindy): threshold(s), several
+    chosen by blocked CV; the library is ``terms`` or a cubic polynomial in the equation's state."""
+
+    threshold: Union[float, list[float]] = Field(default_factory=lambda: [0.01, 0.05, 0.1, 0.5])
+    optimizer: Literal["stlsq", "sr3"] = "stlsq"
+    terms: list[str] | None = None
+
+
+class TakagiSugenoCfg(_Strict):
+    """Takagi–Sugeno model of the unknown part: premise signals, candidate rule counts (K by CV)."""
+
+    inputs: list[str] | None = None       # default: the equation's state
+    rules: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [2, 5, 11], min_length=1)
+    method: Literal["global", "local"] = "global"
+
+
 class StructuresCfg(_Strict):
     """Candidate structures for one state equation: d(equation)/dt = known + Σ θ_i term_i."""
 
@@ -125,8 +142,8 @@ class StructuresCfg(_Strict):
     known: Union[str, float] = 0.0
     candidates: dict[str, list[str]] = Field(default_factory=dict)
     library: LibraryCfg | None = None
-    sindy: dict[str, Union[list[float], float, str]] | None = None        # {threshold: [...], optimizer}
-    takagi_sugeno: dict[str, Union[list[int], list[str], str, float]] | None = None  # {inputs: [x], rules: [2, 5, 11]}
+    sindy: SindyCfg | None = None
+    takagi_sugeno: TakagiSugenoCfg | None = None
     derivative: DerivativeCfg = Field(default_factory=DerivativeCfg)
     cv_folds: int = Field(default=10, ge=2, le=50)
     cv_gap: int = Field(default=10, ge=0)

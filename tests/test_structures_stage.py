@@ -117,6 +117,19 @@ def _cfg(tmp_path, **extra):
     ({"prefilter": [{"name": "lowpass", "params": {"cutoff": 40.0}}]}, "prefilter[0]"),
     ({"prefilter": [{"name": "bandstop"}]}, "prefilter.0.name"),
     ({"structures": {"equation": "x", "library": {}}}, "empty library"),
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}}, "estimators": [{"ls": {"foo": 1}}]},
+     "estimators.ls: unknown option 'foo'"),
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}}, "estimators": [{"ml": {"density": "weird"}}]},
+     "estimators.ml.density: unknown density 'weird'"),
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}, "sindy": {"threshold": "abc"}}},
+     "structures.sindy.threshold"),
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}, "takagi_sugeno": {"rules": [0]}}},
+     "structures.takagi_sugeno.rules.0"),
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}, "takagi_sugeno": {"inputs": ["q"]}}},
+     "structures.takagi_sugeno.inputs: 'q' is not a measured signal"),
+    ({"split": {"warmup": 10}, "model": {"states": ["x"], "inputs": ["u"], "params": {"a": 1.0}, "free": ["a"],
+                                         "equations": {"x": "-a*x + u"}, "initial": "estimate"}},
+     "split.warmup cannot be combined"),
 ])
 def test_bad_structure_and_prefilter_config(tmp_path, capsys, extra, message):
     path = _cfg(tmp_path, **extra)
