@@ -82,11 +82,20 @@ def test_run_id_depends_on_config_and_data_not_clock(tmp_path):
     assert load_config(tmp_path / "demo.yaml").sha256() != id1
 
 
-def test_template_escapes_user_text(tmp_path):
-    """Autoescape: a config name cannot inject HTML (names are restricted; descriptions are escaped)."""
-    from jinja2 import Environment, PackageLoader, select_autoescape
-    env = Environment(loader=PackageLoader("pipeline.report", "templates"), autoescape=select_autoescape(["html"]))
-    assert env.autoescape("report.html") is True
+def test_report_escapes_text_it_did_not_write():
+    """Autoescape: text that reaches the report from findings (descriptions, equations) cannot inject
+    HTML or script into the page."""
+    import contextlib
+    import io
+
+    from pipeline.report import render_report
+    from pipeline.runs import analyse
+    with contextlib.redirect_stderr(io.StringIO()):
+        ctx = analyse(load_config(DEMO))
+    ctx.summary["diagnosis"]["findings"][0]["description"] = "<script>alert(1)</script> & <b>x</b>"
+    html = render_report(ctx)
+    assert "&lt;script&gt;alert(1)&lt;/script&gt; &amp; &lt;b&gt;x&lt;/b&gt;" in html
+    assert "<script" not in html
 
 
 def test_parquet_and_mat_loaders_match_csv(tmp_path):
