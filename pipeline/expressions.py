@@ -131,9 +131,16 @@ def to_source(expr: Expr | ast.expr, rename: dict[str, str] | None = None, *, sc
     return gen(node)
 
 
+_VECTORIZED: dict[tuple[str, tuple[str, ...]], object] = {}
+
+
 def vectorize(expr: Expr, arg_names: list[str]):
-    """A numpy function ``f(*arrays)`` evaluating ``expr`` elementwise (names bound positionally)."""
-    src = f"def _f({', '.join(arg_names)}):\n    return {to_source(expr)}\n"
-    scope: dict = {"np": np}
-    exec(compile(src, "<expression>", "exec"), scope)  # source generated from a checked AST only
-    return scope["_f"]
+    """A numpy function ``f(*arrays)`` evaluating ``expr`` elementwise (names bound positionally);
+    cached by expression text and argument names (a checked text always gives the same function)."""
+    key = (expr.text, tuple(arg_names))
+    if key not in _VECTORIZED:
+        src = f"def _f({', '.join(arg_names)}):\n    return {to_source(expr)}\n"
+        scope: dict = {"np": np}
+        exec(compile(src, "<expression>", "exec"), scope)  # source generated from a checked AST only
+        _VECTORIZED[key] = scope["_f"]
+    return _VECTORIZED[key]

@@ -21,8 +21,7 @@ from scipy.optimize import least_squares
 
 from .data import Record, Split
 from .errors import ConfigError, SimulationError
-from .expressions import vectorize
-from .model import Model
+from .model import Model, rhs_vectorized
 from .simulate import outputs, simulate_states
 
 
@@ -139,18 +138,12 @@ def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None
     sl = prob.split.est_slice()
     X = np.column_stack([prob.Y[sl, prob.out_names.index(s)] for s in model.states])
     dX = np.gradient(X, prob.t[sl], axis=0)
-    U = prob.U[sl]
-    args = list(model.states) + list(model.inputs) + list(model.params) + ["t"]
-    fns = [vectorize(model.equations[s], args) for s in model.states]
+    U, t = prob.U[sl], prob.t[sl]
     free = list(model.free)
 
     def resid(th):
-        p = dict(model.params)
-        p.update(zip(free, th))
-        vals = [X[:, i] for i in range(X.shape[1])] + [U[:, j] for j in range(len(model.inputs))]
-        vals += [p[k] for k in model.params] + [prob.t[sl]]
-        r = [dX[:, i] - np.broadcast_to(f(*vals), dX[:, i].shape) for i, f in enumerate(fns)]
-        return np.concatenate(r) / (np.std(dX) + 1e-300)
+        f = rhs_vectorized(model.with_params(dict(zip(free, th))), X, U, t)
+        return (dX - f).T.ravel() / (np.std(dX) + 1e-300)
 
     th0 = np.array([model.params[k] for k in free])
     try:

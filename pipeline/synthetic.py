@@ -169,10 +169,10 @@ def _simulate(m: Model, t: np.ndarray, u: np.ndarray, state: str | None = None) 
     res = simulate_states(m, t, u[:, None], np.zeros(len(m.states)))
     if res.diverged_at is not None:
         raise RuntimeError("synthetic system diverged")
-    return res.X[:, m.states.index(state or BASE_MEASURED(m))]
+    return res.X[:, m.states.index(state or _measured_state(m))]
 
 
-def BASE_MEASURED(m: Model) -> str:
+def _measured_state(m: Model) -> str:
     for b in BASE.values():
         if tuple(b["states"]) == m.states:
             return b["measured"]
@@ -187,6 +187,18 @@ def config_for(syn: Synthetic, data_path: str, *, name: str | None = None, seed:
             "data": {"path": data_path, "time": "t", "inputs": ["u"], "outputs": [out], "intersample": "zoh"},
             "model": syn.config, "split": {"validation_fraction": 0.3},
             "diagnose": {"families": "all", "alpha": 0.01, "max_findings": max_findings}}
+
+
+def siso_narx(n: int, sigma: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """SysIdentPy's documented ``get_siso_data`` system, seeded: x ~ U(−1, 1), e ~ N(0, σ²),
+    y[k] = 0.2 y[k−1] + 0.1 y[k−1] x[k−1] + 0.9 x[k−2] + e[k]. Returns (x, y)."""
+    rng = np.random.default_rng(seed)
+    e = rng.normal(0.0, sigma, n)
+    x = rng.uniform(-1.0, 1.0, n)
+    y = np.zeros(n)
+    for k in range(2, n):
+        y[k] = 0.2 * y[k - 1] + 0.1 * y[k - 1] * x[k - 1] + 0.9 * x[k - 2] + e[k]
+    return x, y
 
 
 def course_project(dt: float = 0.05, duration: float = 100.0):

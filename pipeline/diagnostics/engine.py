@@ -27,7 +27,7 @@ import numpy as np
 from .. import criteria
 from ..fit import FitResult, Problem, fit_output_error, simulate_until
 from ..model import Model, rhs_vectorized, term_values
-from ..simulate import outputs, simulate_states
+from ..simulate import simulate_states
 from . import stats
 from ..config import NOISE_FAMILIES
 from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
@@ -127,22 +127,21 @@ class Diagnoser:
         Y = simulate_until(model, self.prob, x0, self.prob.split.est[1])
         return None if Y is None else Y[self.prob.split.est[0]:]
 
-    def _step(self, fit: FitResult, hyp: Hypothesis, coef: str) -> float:
+    def _step(self, fit: FitResult, hyp: Hypothesis, coef: str, X: np.ndarray) -> float:
+        """Finite-difference step for a new coefficient: 1e-3 × the equation's derivative scale over the
+        term's scale on the fitted model's simulated states X."""
         term = next((t for t in hyp.terms if t.coef == coef), None)
         if term is None:  # input delay
             return 0.5 * self.dt
         if term.kind == "out_const":
             return 1e-3 * float(np.std(self.prob.Y[:, 0]) or 1.0)
         m = fit.model
-        X = simulate_states(m, self.prob.t, self.prob.U, fit.x0, bound=self.prob.bound).X
         i = m.states.index(term.target)
         dscale = float(np.std(np.gradient(X[:, i], self.dt))) or 1.0
         z = X[:, m.states.index(term.var)] if term.var else None
         tscale = {"const": 1.0, "sin": 0.7, "cos": 0.7}.get(term.kind)
         if tscale is None:
-            tv = {"pow": lambda: z ** term.power, "sign": lambda: np.sign(z),
-                  "absprod": lambda: z * np.abs(z)}[term.kind]()
-            tscale = float(np.std(tv)) or 1.0
+            tscale = float(np.std(term_values(term.kind, z, self.prob.t, term.power))) or 1.0
         return 1e-3 * dscale / tscale
 
     def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
@@ -154,13 +153,13 @@ class Diagnoser:
         params.update(values or {})
         return fit.model.extend(hyp.terms, params)
 
-    def test(self, fit: FitResult, hyp: Hypothesis) -> stats.WaldResult | None:
+    def test(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> stats.WaldResult | None:
         base = self._sim_est(self.hyp_model(fit, hyp), fit.x0)
         if base is None:
             return None
         cols = []
         for c in hyp.coefs:
-            h = self._step(fit, hyp, c)
+            h = self._step(fit, hyp, c, X)
             Yh = self._sim_est(self.hyp_model(fit, hyp, {c: h}), fit.x0)
             if Yh is None:
                 return None
@@ -216,7 +215,7 @@ class Diagnoser:
                                               X=X)
             best: Candidate | None = None
             for h in hyps:
-                wr = self.test(fit, h)
+                wr = self.test(fit, h, X)
                 if wr is None:
                     continue
                 ev = [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic, "p_value": wr.p_value,
@@ -303,10 +302,10 @@ class Diagnoser:
         _log(f"fitting the nominal model ({len(model.free)} free parameters, output error)")
         nominal = fit_output_error(model, prob, start=start)
         current = nominal
-        tests0, _ = residual_tests(nominal, prob, self.alpha)
+        tests0, f_cyc0 = residual_tests(nominal, prob, self.alpha)
         findings, history, fits = [], [], [nominal]
         for it in range(self.max_findings):
-            tests, f_cyc = residual_tests(current, prob, self.alpha)
+            tests, f_cyc = (tests0, f_cyc0) if it == 0 else residual_tests(current, prob, self.alpha)
             fisher = next(t for t in tests if t.name == "fisher_g")
             cands = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)

@@ -15,12 +15,8 @@ from pipeline.structures.library import Library, narx
 
 def siso_data(n=1000, sigma=0.001, seed=0):
     """SysIdentPy's get_siso_data, seeded: y[k] = 0.2y[k-1] + 0.1y[k-1]x[k-1] + 0.9x[k-2] + e[k]."""
-    rng = np.random.default_rng(seed)
-    e = rng.normal(0.0, sigma, n)
-    x = rng.uniform(-1, 1, n)
-    y = np.zeros(n)
-    for k in range(2, n):
-        y[k] = 0.2 * y[k - 1] + 0.1 * y[k - 1] * x[k - 1] + 0.9 * x[k - 2] + e[k]
+    from pipeline.synthetic import siso_narx
+    x, y = siso_narx(n, sigma, seed)
     return {"x": x, "y": y}
 
 
