@@ -1,26 +1,54 @@
-"""Command line: ``sysid report CONFIG [--out DIR]``, ``sysid diagnose CONFIG [--out DIR]``.
+"""Command line: ``sysid report CONFIG [--out DIR]``, ``sysid diagnose CONFIG [--out DIR]`` and the
+commands registered by other modules (``COMMAND_MODULES``).
 
 Exit codes: 0 ok, 2 bad input (config, data, options: one message naming file and key), 1 internal
 error. ``--out`` is the run folder itself (default ``reports/<run-id>``).
+
+A command module exposes ``register(subparsers) -> dict[name, handler]``; a handler takes the parsed
+``argparse.Namespace`` and returns the exit code. It raises :class:`pipeline.errors.InputError` for
+bad input; :func:`main` turns that into one ``error:`` line and exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 import traceback
 
+# modules that add subcommands (each one file, one line here)
+COMMAND_MODULES: list[str] = []
 
-def main(argv: list[str] | None = None) -> int:
+
+def _run_command(args: argparse.Namespace) -> int:
+    from .runs import run
+    path = run(args.config, args.out, html=args.cmd == "report")
+    if args.cmd == "report":
+        print(f"report: {path / 'report.html'}")
+    else:
+        print(f"run folder: {path}")
+    return 0
+
+
+def build_parser() -> tuple[argparse.ArgumentParser, dict]:
     ap = argparse.ArgumentParser(prog="sysid", description="What the simulation gets wrong, why, the fix "
                                  "and its worth.")
     sub = ap.add_subparsers(dest="cmd", required=True)
+    handlers = {}
     for name, helptext in (("report", "run the pipeline and write the run folder with report.html"),
                            ("diagnose", "run the pipeline and write the run folder without the HTML")):
         p = sub.add_parser(name, help=helptext)
         p.add_argument("config", help="YAML config (see configs/demo.yaml)")
         p.add_argument("--out", help="run folder to write (default reports/<run-id>)")
+        handlers[name] = _run_command
+    for modname in COMMAND_MODULES:
+        handlers.update(importlib.import_module(modname).register(sub))
+    return ap, handlers
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap, handlers = build_parser()
     try:
         args = ap.parse_args(argv)
     except SystemExit as exc:  # argparse: usage errors are bad input
@@ -28,8 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from .errors import InputError
     try:
-        from .runs import run
-        path = run(args.config, args.out, html=args.cmd == "report")
+        return handlers[args.cmd](args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -40,11 +67,6 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exc()
         print("internal error: please report it with the traceback above", file=sys.stderr)
         return 1
-    if args.cmd == "report":
-        print(f"report: {path / 'report.html'}")
-    else:
-        print(f"run folder: {path}")
-    return 0
 
 
 if __name__ == "__main__":
