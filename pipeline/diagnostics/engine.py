@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import criteria
-from ..fit import FitResult, Problem, fit_output_error, simulate_until
+from ..fit import FitResult, Problem, fit_output_error, simulate_until, states_full
 from ..model import Model, rhs_vectorized, term_values
 from ..simulate import simulate_states
 from . import stats
@@ -58,6 +58,7 @@ class Diagnosis:
     history: list[dict]          # every hypothesis tested, per iteration (for the report)
     fits: list[FitResult]        # nominal, then each accepted extension
     noise_tests: list[stats.TestResult] = field(default_factory=list)
+    final_tests: list[stats.TestResult] = field(default_factory=list)   # residual tests of the final model
 
 
 def _log(msg: str) -> None:
@@ -208,7 +209,7 @@ class Diagnoser:
     # -- one iteration -----------------------------------------------------------------------------
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> list[Candidate]:
         st = Structure.of(fit.model)
-        X = simulate_states(fit.model, self.prob.t, self.prob.U, fit.x0, bound=self.prob.bound).X
+        X = states_full(fit.model, self.prob, fit.x0)
         out = []
         for fam in self.families:
             if fam not in REGISTRY:
@@ -350,7 +351,8 @@ class Diagnoser:
             _log("noise families on the final model: " + ", ".join(noise_fams))
             nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed, n_boot=self.n_boot)
             findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
-        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests)
+        final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
+        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests)
 
     def finding(self, c: Candidate) -> dict:
         h, fit = c.hyp, c.fit
