@@ -6,7 +6,8 @@ so the final name never holds a partial run and nothing this tool did not create
 **What a run folder is.** A folder holding the regular file ``.sysid-run`` (the *marker*), a JSON
 object ``{"tool": "sysid-pipeline", "format": 1, "run_id": ..., "files": {relative path: size}}``.
 The marker is written last, after every other file has been written and flushed, so a folder with a
-valid marker whose listed files all exist with the listed sizes is *complete*. Folders written by
+valid marker whose listed files all exist with the listed sizes is *complete* (what readers use), and
+it is *replaceable* only when it holds nothing but those files (a user's added note keeps it safe). Folders written by
 releases before the marker existed are recognised too (:func:`is_legacy_run`): only regular files, all
 with the names the old ``write_run`` wrote, with ``summary.json`` of schema ``sysid-summary/*`` and a
 ``manifest.json`` naming ``sysid-pipeline``.
@@ -114,6 +115,19 @@ def is_legacy_run(folder: Path) -> bool:
             and TOOL in manifest["versions"])
 
 
+def _listed_files_ok(folder: Path, files: dict) -> bool:
+    for rel, size in files.items():
+        if not isinstance(rel, str) or Path(rel).is_absolute() or ".." in Path(rel).parts:
+            return False
+        try:
+            st = os.lstat(folder / rel)
+        except OSError:
+            return False
+        if not stat.S_ISREG(st.st_mode) or st.st_size != size:
+            return False
+    return True
+
+
 def is_complete_run(folder: Path) -> bool:
     """True when ``folder`` is a real folder (not a symlink) holding a complete run of this tool:
     a valid marker whose every listed file exists with its listed size, or a legacy run folder."""
@@ -126,16 +140,26 @@ def is_complete_run(folder: Path) -> bool:
     marker = read_marker(folder)
     if marker is None:
         return is_legacy_run(folder)
-    for rel, size in marker["files"].items():
-        p = folder / rel
-        if Path(rel).is_absolute() or ".." in Path(rel).parts:
-            return False
-        try:
-            st = os.lstat(p)
-        except OSError:
-            return False
-        if not stat.S_ISREG(st.st_mode) or st.st_size != size:
-            return False
+    return _listed_files_ok(folder, marker["files"])
+
+
+def is_replaceable_run(folder: Path) -> bool:
+    """A complete run folder holding nothing else: every file below it is listed in the marker (or
+    it is a legacy run folder). A run folder to which the user added a file is not replaceable."""
+    folder = Path(folder)
+    if not is_complete_run(folder):
+        return False
+    marker = read_marker(folder)
+    if marker is None:
+        return True  # legacy: is_legacy_run already allows only the old file names
+    allowed = set(marker["files"]) | {MARKER}
+    for dirpath, dirnames, filenames in os.walk(folder):
+        for fn in filenames:   # os.walk lists symlinks to folders as dirnames: check those too
+            if str((Path(dirpath) / fn).relative_to(folder)) not in allowed:
+                return False
+        for dn in dirnames:
+            if (Path(dirpath) / dn).is_symlink():
+                return False
     return True
 
 
@@ -279,9 +303,9 @@ def _check_existing(target: Path, shown: str) -> None:
         empty = not any(os.scandir(target))
     except OSError as exc:
         raise _err(shown, f"cannot list the folder: {exc.strerror}") from None
-    if not empty and not is_complete_run(target):
-        raise _err(shown, f"exists and holds files this tool did not write (no {MARKER} marker of a "
-                   f"complete run); {expected}; nothing was changed")
+    if not empty and not is_replaceable_run(target):
+        raise _err(shown, f"exists and holds files this tool did not write (not exactly the files of a "
+                   f"complete run listed in its {MARKER} marker); {expected}; nothing was changed")
 
 
 def check_target(target: Path, *, inputs: list[Path], default: bool) -> Path:
@@ -459,7 +483,7 @@ def publish(tmp: Path, target: Path) -> Path:
             kill_point("after_new_renamed_in")
             _fsync_path(target.parent, directory=True)
             return target
-        if not is_complete_run(target):
+        if not is_replaceable_run(target):
             raise _err(target, "changed during the run and is no longer empty or an earlier run folder "
                        "of this tool; nothing was changed")
         old = target.parent / _side_name(target.name, "old")
