@@ -3,13 +3,16 @@ shared by the run-folder tests of the hostile corpus."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import shutil
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
+import pytest
 import yaml
 
 from .harness import ROOT
@@ -59,3 +62,27 @@ def run_files(folder: Path) -> dict[str, bytes]:
 
 def marker(folder: Path) -> dict:
     return json.loads((folder / ".sysid-run").read_text())
+
+
+@contextlib.contextmanager
+def read_only(d: Path):
+    """Make the folder ``d`` one nothing can be created in: chmod 0555 for a normal user; as root (who
+    ignores modes) a read-only bind mount of it onto itself; ``pytest.skip`` where neither works."""
+    if os.geteuid() != 0:
+        d.chmod(0o555)
+        try:
+            yield d
+        finally:
+            d.chmod(0o755)
+        return
+    if shutil.which("mount") is None:
+        pytest.skip("root without mount(8): cannot make a read-only folder")
+    ok = subprocess.run(["mount", "--bind", str(d), str(d)], capture_output=True).returncode == 0
+    ok = ok and subprocess.run(["mount", "-o", "remount,bind,ro", str(d)], capture_output=True).returncode == 0
+    if not ok:
+        subprocess.run(["umount", str(d)], capture_output=True)
+        pytest.skip("root without permission to bind-mount read-only")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=True)

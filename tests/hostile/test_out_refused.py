@@ -4,15 +4,13 @@ fast) and every file that was there before is byte-identical afterwards (nothing
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
 
-from .demo_project import Project, make_project, tree
+from .demo_project import Project, make_project, read_only, tree
 from .harness import assert_bad_input, run_cli
 
 FAST_S = 10.0  # the demo's analysis alone takes ~3 s, import + config load well under 2 s
@@ -188,27 +186,11 @@ def test_bad_out_is_refused_before_the_analysis_and_changes_nothing(tmp_path, ca
 
 @pytest.fixture
 def read_only_folder(tmp_path):
-    """A folder nothing can be created in: chmod 0555 for a normal user; as root (who ignores modes)
-    a read-only bind mount of it; skipped where neither is possible."""
     d = tmp_path / "ro"
     d.mkdir()
     (d / "existing.txt").write_text("keep\n")
-    if os.geteuid() != 0:
-        d.chmod(0o555)
+    with read_only(d):
         yield d
-        d.chmod(0o755)
-        return
-    if shutil.which("mount") is None:
-        pytest.skip("root without mount(8): cannot make a read-only folder")
-    ok = subprocess.run(["mount", "--bind", str(d), str(d)], capture_output=True).returncode == 0
-    ok = ok and subprocess.run(["mount", "-o", "remount,bind,ro", str(d)], capture_output=True).returncode == 0
-    if not ok:
-        subprocess.run(["umount", str(d)], capture_output=True)
-        pytest.skip("root without permission to bind-mount read-only")
-    try:
-        yield d
-    finally:
-        subprocess.run(["umount", str(d)], check=True)
 
 
 def test_read_only_parent_is_refused(tmp_path, read_only_folder):
