@@ -443,13 +443,18 @@ def _publish_lock(target: Path) -> Iterator[None]:
     """Exclusive flock serialising publishes into ``target.parent``: on the parent folder itself
     (no file left behind) or, where folders cannot be locked (some network filesystems), on
     ``.<name>.lock`` beside the target."""
-    fd = os.open(target.parent, os.O_RDONLY | os.O_DIRECTORY)
+    fd = -1
     try:
+        fd = os.open(target.parent, os.O_RDONLY | os.O_DIRECTORY)
         fcntl.flock(fd, fcntl.LOCK_EX)
     except OSError:
-        os.close(fd)
-        fd = os.open(target.parent / f".{target.name}.lock", os.O_RDWR | os.O_CREAT, 0o666)
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        if fd >= 0:
+            os.close(fd)
+        try:
+            fd = os.open(target.parent / f".{target.name}.lock", os.O_RDWR | os.O_CREAT, 0o666)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as exc:
+            raise _err(target, f"cannot lock {target.parent} for publishing: {exc.strerror}") from None
     try:
         yield
     finally:
