@@ -228,7 +228,7 @@ def input_folders(inputs: list[Path]) -> list[Path]:
 
 
 def _check_lengths(target: Path, shown: str) -> None:
-    probe = next((p for p in [target.parent, *target.parent.parents] if p.exists()), Path("/"))
+    probe = next((p for p in [target.parent, *target.parent.parents] if os.path.isdir(p)), Path("/"))
     try:
         name_max = os.pathconf(probe, "PC_NAME_MAX")
         path_max = os.pathconf(probe, "PC_PATH_MAX")
@@ -238,8 +238,10 @@ def _check_lengths(target: Path, shown: str) -> None:
         n = len(os.fsencode(part))
         limit = name_max - _SUFFIX_BYTES if part == target.name else name_max
         if n > limit:
+            why = (f"NAME_MAX {name_max} less the temporary-folder suffix" if part == target.name
+                   else f"NAME_MAX {name_max}")
             raise _err(shown, f"the name {part[:40]!r}... is {n} bytes; at most {limit} are possible here "
-                       f"(NAME_MAX {name_max} less the temporary-folder suffix); choose a shorter name")
+                       f"({why}); choose a shorter name")
     # the longest path the run writes: a file inside the temporary folder
     n = len(os.fsencode(str(target))) + _SUFFIX_BYTES + len("/config.resolved.yaml")
     if n >= path_max:
@@ -308,7 +310,7 @@ def _check_existing(target: Path, shown: str) -> None:
                    f"complete run listed in its {MARKER} marker); {expected}; nothing was changed")
 
 
-def check_target(target: Path, *, inputs: list[Path], default: bool) -> Path:
+def check_target(target: Path | str, *, inputs: list[Path], default: bool) -> Path:
     """Check that ``target`` may be written as a run folder and return it resolved (parents' symlinks
     resolved, absolute). ``inputs`` are the files the run reads (config, data); ``default`` is True for
     the default ``reports/<run-id>``, whose parent is then created when missing.
@@ -321,10 +323,18 @@ def check_target(target: Path, *, inputs: list[Path], default: bool) -> Path:
     another pseudo filesystem.
     """
     shown = str(target)
-    resolved = resolve_target(Path(target))
+    if not shown or "\0" in shown:
+        raise _err(repr(shown), "is not a usable path; expected a folder name")
+    try:
+        resolved = resolve_target(Path(target))
+    except OSError as exc:   # e.g. a symlink loop or an over-long name in the parents
+        raise _err(shown, f"cannot resolve the path: {exc.strerror}") from None
     _check_lengths(resolved, shown)
     _check_location(resolved, shown)
-    cwd = Path(os.path.realpath(os.getcwd()))
+    try:
+        cwd = Path(os.path.realpath(os.getcwd()))
+    except OSError:          # the current folder was deleted: nothing to protect there
+        cwd = Path("/nonexistent-cwd")
     if _is_within(cwd, resolved):
         what = "the current folder" if cwd == resolved else f"an ancestor of the current folder {cwd}"
         raise _err(shown, f"is {what}; expected a new folder for this run (e.g. reports/NAME)")

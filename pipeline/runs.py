@@ -243,8 +243,8 @@ def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = 
     """Load the config, check ``--out`` (before any analysis), analyse, write the run folder."""
     lc = load_config(config_path)
     inputs = input_paths(lc)
-    if out:
-        check_target(Path(out), inputs=inputs, default=False)
+    if out is not None:
+        check_target(out, inputs=inputs, default=False)   # "" is refused, not taken as the default
     else:  # the run id follows from the two hashes: check reports/<run-id> now (the data is read later)
         try:
             data_sha = file_sha256(lc.data_path)
@@ -253,4 +253,4 @@ def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = 
         if data_sha is not None:
             check_target(default_target(run_id_of(lc, data_sha)), inputs=inputs, default=True)
     ctx = analyse(lc)
-    return write_run(ctx, Path(out) if out else None, html=html)
+    return write_run(ctx, Path(out) if out is not None else None, html=html)

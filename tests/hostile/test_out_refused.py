@@ -119,6 +119,20 @@ def _filesystem_root(tmp: Path, p: Project) -> tuple[str, Path]:
     return "/", p.root
 
 
+def _empty_string(tmp: Path, p: Project) -> tuple[str, Path]:
+    return "", p.root   # not silently the default, not the current folder
+
+
+def _symlink_loop_parent(tmp: Path, p: Project) -> tuple[str, Path]:
+    (tmp / "loop1").symlink_to(tmp / "loop2")
+    (tmp / "loop2").symlink_to(tmp / "loop1")
+    return str(tmp / "loop1" / "run"), p.root
+
+
+def _over_long_parent_component(tmp: Path, p: Project) -> tuple[str, Path]:
+    return str(tmp / ("d" * 300) / "run"), p.root
+
+
 def _run_folder_with_user_file(tmp: Path, p: Project) -> tuple[str, Path]:
     # a complete earlier run (marker and files) to which the user added a note: not replaceable
     d = tmp / "run"
@@ -161,6 +175,9 @@ CASES = {
     "sys_new_name": (_sys_new, "/sys"),
     "parent_of_cwd": (_cwd_parent, "ancestor of the current folder"),
     "filesystem_root": (_filesystem_root, "ancestor of the current folder"),
+    "empty_string": (_empty_string, "not a usable path"),
+    "symlink_loop_in_parent": (_symlink_loop_parent, "symbolic links"),
+    "over_long_parent_component": (_over_long_parent_component, "bytes"),
     "run_folder_with_user_file": (_run_folder_with_user_file, "holds files this tool did not write"),
     "forged_marker_missing_files": (_folder_with_forged_marker_missing_files, "holds files"),
 }
