@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SimulationError
+from .errors import InputError, SimulationError
 from .expressions import to_source
 from .model import Model, term_on
 
@@ -296,10 +296,21 @@ def programs(model: Model) -> Programs:
 
 
 def _cache_dir() -> Path:
+    """``$SYSID_KERNEL_CACHE/kernels`` (default ``$XDG_CACHE_HOME/sysid-pipeline/kernels``), created and
+    checked writable; a file or an unwritable place there is bad input naming the variable and path."""
     d = os.environ.get("SYSID_KERNEL_CACHE")
     base = Path(d) if d else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "sysid-pipeline"
     path = base / "kernels"
-    path.mkdir(parents=True, exist_ok=True)
+    how = (f"SYSID_KERNEL_CACHE={d}" if d else
+           f"the kernel cache {base} (set SYSID_KERNEL_CACHE to a writable folder)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{how}: cannot create the folder {path}: {exc.strerror or exc}; expected a "
+                         "writable folder for the compiled simulation kernels") from None
+    if not path.is_dir() or not os.access(path, os.W_OK | os.X_OK):
+        raise InputError(f"{how}: {path} is not a writable folder; expected a writable folder for the "
+                         "compiled simulation kernels")
     return path
 
 
@@ -331,10 +342,14 @@ def get_kernel(model: Model):
     d = _cache_dir()
     path = d / f"k_{key}.py"
     if not path.exists() or path.read_text() != src:
-        fd, tmp = tempfile.mkstemp(dir=d, suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            fh.write(src)
-        os.replace(tmp, path)
+        try:
+            fd, tmp = tempfile.mkstemp(dir=d, suffix=".tmp")
+            with os.fdopen(fd, "w") as fh:
+                fh.write(src)
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise InputError(f"SYSID_KERNEL_CACHE: cannot write the kernel {path}: {exc.strerror or exc}; "
+                             "expected a writable folder for the compiled simulation kernels") from None
     modname = f"sysid_kernel_{key}"
     spec = importlib.util.spec_from_file_location(modname, path)
     mod = importlib.util.module_from_spec(spec)
