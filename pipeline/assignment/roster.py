@@ -41,8 +41,9 @@ def load_roster(path: str | Path) -> list[Student]:
     header = [c.strip().lower() for c in rows[0]]
     for col in ("id", "name"):
         if col not in header:
-            raise InputError(f"no column {col!r} in the header (found: {', '.join(header) or 'nothing'}); "
-                             "expected 'id,name[,email]'", file=f)
+            found = ", ".join(header)[:60] or "nothing"
+            raise InputError(f"no column {col!r} in the header (found: {found}); expected 'id,name[,email]'",
+                             file=f)
     i_id, i_name = header.index("id"), header.index("name")
     i_mail = header.index("email") if "email" in header else None
     students: list[Student] = []
