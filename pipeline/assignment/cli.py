@@ -10,6 +10,7 @@ Bad submissions are rows of the gradebook with the reason.
 from __future__ import annotations
 
 import argparse
+import sys
 from collections import Counter
 from pathlib import Path
 
@@ -38,6 +39,10 @@ def _grade(args: argparse.Namespace) -> int:
     out.write_text(gradebook_csv(rows), encoding="utf-8")
     page.parent.mkdir(parents=True, exist_ok=True)
     page.write_text(render_summary(key.assignment, rows, page, runs), encoding="utf-8")
+    known = {r["student_id"] for r in rows}
+    extra = sorted(p.name for p in Path(args.submissions).iterdir() if p.is_dir() and p.name not in known)
+    if extra:
+        print(f"note: folders not in the key, not graded: {', '.join(extra)}", file=sys.stderr)
     counts = ", ".join(f"{v} {k}" for k, v in sorted(Counter(r["status"] for r in rows).items()))
     print(f"gradebook: {out} ({len(rows)} students: {counts})\nsummary: {page}\nrun reports: {runs}")
     return 0

@@ -137,9 +137,10 @@ def _rmse(r: np.ndarray) -> float:
 
 
 def _relative(msg: str, *bases: Path) -> str:
-    for b in bases:
-        for s in {str(b), str(b.resolve())}:
-            msg = msg.replace(s + os.sep, "").replace(s, ".")
+    """``msg`` with the given folders removed from the paths it names (no absolute paths in a row)."""
+    names = {str(b.resolve()) for b in bases} | {str(b) for b in bases if str(b) not in (".", "")}
+    for s in sorted(names, key=len, reverse=True):
+        msg = msg.replace(s + os.sep, "").replace(s, ".")
     return " ".join(msg.split())
 
 

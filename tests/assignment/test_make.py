@@ -165,3 +165,18 @@ def test_out_folder_not_ours_is_refused_and_kept(tmp_path, capsys):
     assert rc == 2 and "--out" in err
     assert (out / "notes.txt").read_text() == "precious" and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temporary folder left
+
+
+def test_cli_subprocess_bad_instructor_input_contract(tmp_path):
+    """The real CLI in a subprocess (tests/hostile harness): exit 2, one error line, no traceback,
+    nothing written."""
+    from tests.hostile.harness import assert_bad_input, run_cli, snapshot
+    r = tmp_path / "roster.csv"
+    r.write_bytes(b"id,name\n\xff\xfe,x\n")
+    before = snapshot(tmp_path)
+    res = run_cli("assignment", "make", "--roster", str(r), "--template", str(TEMPLATE), "--out", str(tmp_path / "o"))
+    assert_bad_input(res, str(r), "UTF-8")
+    res = run_cli("grade", "--key", str(tmp_path / "nokey.json"), "--submissions", str(tmp_path),
+                  "--out", str(tmp_path / "g.csv"))
+    assert_bad_input(res, "nokey.json", "key not found")
+    assert snapshot(tmp_path) == before
