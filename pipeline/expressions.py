@@ -2,7 +2,7 @@
 
 Grammar: numbers, names (states, inputs, params, ``t``), the constant ``pi``, ``+ - * / **``, unary
 minus, parentheses and the functions ``sin cos tan exp log sqrt abs sign tanh sinh cosh arctan minimum
-maximum clip``. Limits (one clear error each): at most ``MAX_CHARS`` characters, ``MAX_NODES`` syntax
+maximum clip step`` (``step(x)`` is 1 for x ≥ 0, else 0). Limits (one clear error each): at most ``MAX_CHARS`` characters, ``MAX_NODES`` syntax
 nodes and nesting depth ``MAX_DEPTH``; constants finite; a constant subexpression (no names) must
 evaluate to a finite number (``1/0`` and ``log(-1)`` are errors at parse time, not at run time).
 Text is NFKC-normalised first, as Python normalises identifiers (fullwidth ``ｋ`` is ``k``).
@@ -42,6 +42,7 @@ FUNCTIONS = {
     "minimum": (2, "np.minimum", "min"),
     "maximum": (2, "np.maximum", "max"),
     "clip": (3, "np.clip", None),
+    "step": (1, None, None),       # Heaviside: 1 for x >= 0, else 0 (a parameter jump at a time)
 }
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 CONSTANTS = {"pi": math.pi}
@@ -235,6 +236,8 @@ def to_source(expr: Expr | ast.expr, rename: dict[str, str] | None = None, *, sc
             args = [gen(a) for a in n.args]
             if name == "clip" and scalar:
                 return f"min(max({args[0]}, {args[1]}), {args[2]})"
+            if name == "step":
+                return f"(1.0 if {args[0]} >= 0.0 else 0.0)" if scalar else f"np.heaviside({args[0]}, 1.0)"
             fn = FUNCTIONS[name][2 if scalar else 1]
             return f"{fn}({', '.join(args)})"
         raise TypeError(type(n).__name__)  # unreachable for checked expressions

@@ -28,7 +28,7 @@ import yaml
 from . import __version__
 from .jsonutil import clean as _clean
 from .jsonutil import dumps
-from .config import FAMILIES_V1, NOISE_FAMILIES, LoadedConfig, load_config
+from .config import LoadedConfig, implemented_families, load_config, noise_families
 from .errors import SimulationError
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
@@ -67,7 +67,7 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
 
 def families_of(lc: LoadedConfig) -> list[str]:
     fam = lc.cfg.diagnose.families
-    return list(FAMILIES_V1) if fam == "all" else [f for f in fam if f in FAMILIES_V1]
+    return list(implemented_families()) if fam == "all" else [f for f in fam if f in implemented_families()]
 
 
 def run_id_of(lc: LoadedConfig, data_sha256: str) -> str:
@@ -106,7 +106,8 @@ def analyse(lc: LoadedConfig) -> RunContext:
     prob = Problem.from_record(rec, model, split, lc.cfg.split.warmup)
     d = lc.cfg.diagnose
     dg = Diagnoser(prob, alpha=d.alpha, families=families_of(lc), max_findings=d.max_findings,
-                   seed=lc.cfg.seed, n_boot=d.bootstrap, max_delay_s=d.max_delay_s, dt=rec.dt)
+                   seed=lc.cfg.seed, n_boot=d.bootstrap, max_delay_s=d.max_delay_s, dt=rec.dt,
+                   couplings=d.couplings)
     try:
         diag = dg.run(model, start=equation_error_start(model, prob))
     except SimulationError as exc:  # name the config: the parameters or equations are the cause
@@ -133,12 +134,12 @@ def analyse(lc: LoadedConfig) -> RunContext:
 def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> dict:
     nominal = model_block(diag.nominal, prob)
     ignored = [f for f in (lc.cfg.diagnose.families if isinstance(lc.cfg.diagnose.families, list) else [])
-               if f not in FAMILIES_V1]
+               if f not in implemented_families()]
     models = [{"name": "nominal", "estimator": "output_error_ls", "bic": nominal["bic"],
                "n_params": nominal["n_params"], "validation_rmse_sim": nominal["validation"]["rmse_sim"],
                "cv_rmse_sim": None}]
     name = "nominal"
-    for f, fit in zip([f for f in diag.findings if f["family"] not in NOISE_FAMILIES], diag.fits[1:]):
+    for f, fit in zip([f for f in diag.findings if f["family"] not in noise_families()], diag.fits[1:]):
         name = f"{name}+{f['family']}"
         b = model_block(fit, prob)
         models.append({"name": name, "estimator": "output_error_ls", "bic": b["bic"], "n_params": b["n_params"],

@@ -20,7 +20,7 @@ import math
 import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,9 +29,8 @@ from ..fit import FitResult, Problem, fit_output_error, simulate_until, states_f
 from ..model import Model, rhs_vectorized, term_on
 from ..simulate import simulate_states
 from . import stats
-from ..config import NOISE_FAMILIES
 from ..errors import InputError
-from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
+from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
 from .noise import diagnose_noise
 
 
@@ -117,7 +116,8 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator, n_b
 
 class Diagnoser:
     def __init__(self, prob: Problem, *, alpha: float, families: list[str], max_findings: int, seed: int,
-                 n_boot: int = 400, max_delay_s: float | None = None, dt: float = 1.0):
+                 n_boot: int = 400, max_delay_s: float | None = None, dt: float = 1.0, couplings: bool = False):
+        self.couplings = couplings
         self.prob, self.alpha, self.families = prob, alpha, families
         self.max_findings, self.seed, self.n_boot = max_findings, seed, n_boot
         self.dt = dt
@@ -129,94 +129,106 @@ class Diagnoser:
         Y = simulate_until(model, self.prob, x0, self.prob.split.est[1])
         return None if Y is None else Y[self.prob.split.est[0]:]
 
+    def sim_est(self, model: Model, x0: np.ndarray) -> np.ndarray | None:
+        return self._sim_est(model, x0)
+
     def _step(self, fit: FitResult, hyp: Hypothesis, coef: str, X: np.ndarray) -> float:
-        """Finite-difference step for a new coefficient: 1e-3 × the equation's derivative scale over the
-        term's scale on the fitted model's simulated states X."""
+        """Finite-difference step for a tested parameter: the family's absolute ``info['step']`` or
+        1e-3 × its ``info['scale']``; for an additive term, 1e-3 × the equation's derivative scale over
+        the term's RMS on the fitted model's simulated states X."""
+        if "step" in hyp.info:
+            return float(hyp.info["step"])
+        if "scale" in hyp.info:
+            return 1e-3 * float(hyp.info["scale"])
         term = next((t for t in hyp.terms if t.coef == coef), None)
-        if term is None:  # input delay
-            return 0.5 * self.dt
+        if term is None:
+            return 1e-3
         if term.is_output:
             return 1e-3 * float(np.std(self.prob.Y[:, 0]) or 1.0)
         m = self.hyp_model(fit, hyp)
         i = m.states.index(term.target)
         dscale = float(np.nanstd(np.gradient(X[:, i], self.dt))) or 1.0
-        vals = term_on(m, term, X, self.prob.U, self.prob.t)
+        Xm = X if X.shape[1] == len(m.states) else states_full(m, self.prob, self._x0_for(fit, m))
+        vals = term_on(m, term, Xm, self.prob.U, self.prob.t)
         tscale = float(np.sqrt(np.nanmean(vals ** 2))) or 1.0
         return 1e-3 * dscale / tscale
 
+    @staticmethod
+    def _x0_for(fit: FitResult, model: Model) -> np.ndarray:
+        """The fit's initial state extended by the initial values of a hypothesis' extra states."""
+        extra = [float(model.initial[s]) for s in model.states[len(fit.x0):]]
+        return np.concatenate([fit.x0, extra]) if extra else fit.x0
+
     def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
-        if hyp.family == "input_delay":
-            name = hyp.coefs[0]
-            d = (values or {}).get(name, 0.0)
-            return fit.model.extend([], {name: d}, delay=name)
-        params = {c: 0.0 for c in hyp.coefs}
-        params.update(hyp.extra_params)
-        params.update(values or {})
-        return fit.model.extend(hyp.terms, params)
+        return REGISTRY[hyp.family].extend(fit.model, hyp, values)
 
     def test(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> stats.WaldResult | None:
-        base = self._sim_est(self.hyp_model(fit, hyp), fit.x0)
+        m0 = self.hyp_model(fit, hyp)
+        x0 = self._x0_for(fit, m0)
+        base = self._sim_est(m0, x0)
         if base is None:
             return None
         cols = []
         for c in hyp.coefs:
             h = self._step(fit, hyp, c, X)
-            Yh = self._sim_est(self.hyp_model(fit, hyp, {c: h}), fit.x0)
+            null = float(hyp.null.get(c, 0.0))
+            Yh = self._sim_est(self.hyp_model(fit, hyp, {c: null + h}), x0)
             if Yh is None:
                 return None
             cols.append((((Yh - base) * self.w).ravel()) / h)
         S = np.column_stack(cols)
+        if not np.all(np.isfinite(S)) or not np.any(S):
+            return None
         e = (fit.resid_est * self.w).ravel()
         return stats.added_terms_test(e, fit.jac, S)
 
     # -- refits ------------------------------------------------------------------------------------
     def refit(self, fit: FitResult, cand: Candidate) -> FitResult | None:
+        """The family's model refitted from the Wald estimate; retried from 1/2, 1/4 and 0 of that
+        step when the refit diverges; None (with the reasons in ``cand.reason``) when every start fails."""
         hyp = cand.hyp
+        fam = REGISTRY[hyp.family]
+        beta = cand.wald.beta if cand.wald is not None else np.zeros(len(hyp.coefs))
+        why = []
+        for scale in (1.0, 0.5, 0.25, 0.0):
+            start = {c: float(hyp.null.get(c, 0.0)) + scale * float(b) for c, b in zip(hyp.coefs, beta)}
+            try:
+                m = fam.refit_model(fit.model, hyp, start)
+                if m.extra_states:
+                    m = replace(m, initial=dict(m.initial))
+                return fit_output_error(m, self.prob)
+            except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:
+                why.append(f"from {scale:g} x the test's estimate: {exc}")
+        cand.reason = "refit failed " + "; ".join(why)[:600]
+        return None
+
+    def estimate(self, fit: FitResult, cand: Candidate) -> FitResult | None:
+        fam = REGISTRY[cand.hyp.family]
         try:
-            if hyp.family == "input_delay":
-                return self._fit_delay(fit, hyp.coefs[0])
-            start = {c: float(b) for c, b in zip(hyp.coefs, cand.wald.beta)}
-            return fit_output_error(self.hyp_model(fit, hyp, start), self.prob)
+            if hasattr(fam, "estimate"):
+                return fam.estimate(self, fit, cand)
+            return self.refit(fit, cand)
         except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:  # rejected, not fatal
             cand.reason = f"refit failed: {exc}"
             return None
 
-    def _fit_delay(self, fit: FitResult, name: str) -> FitResult | None:
-        """Profile search: weighted SSE over integer delays 0..max with the current parameters, a
-        parabola through the best one and its neighbours for the fractional part, then one refit of
-        all free parameters at that delay. None when the best delay is below a quarter sample."""
-        y = self.prob.Y[self.prob.split.est_slice()]
-        kmax = max(1, min(int(round(self.max_delay / self.dt)), len(y) // 4))
-        sse = []
-        for k in range(kmax + 1):
-            m = fit.model.extend([], {name: k * self.dt}, delay=name)
-            Yh = self._sim_est(m, fit.x0)
-            sse.append(np.inf if Yh is None else float(np.sum(((y - Yh) * self.w) ** 2)))
-        k0 = int(np.argmin(sse))
-        frac = 0.0
-        if 0 < k0 < kmax:
-            s0, s1, s2 = sse[k0 - 1], sse[k0], sse[k0 + 1]
-            den = s0 - 2 * s1 + s2
-            frac = float(np.clip(0.5 * (s0 - s2) / den, -0.5, 0.5)) if den > 0 else 0.0
-        d = (k0 + frac) * self.dt
-        if d < 0.25 * self.dt:
-            return None
-        m = fit.model.extend([], {name: d}, delay=name)
-        return fit_output_error(m, self.prob)
-
     # -- one iteration -----------------------------------------------------------------------------
-    def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> list[Candidate]:
-        st = Structure.of(fit.model)
-        X = states_full(fit.model, self.prob, fit.x0)
+    def context(self, fit: FitResult, f_hz: float | None) -> Context:
+        prob = self.prob
+        return Context(fit.model, Structure.of(fit.model), prob.t, prob.U, prob.Y, prob.out_names,
+                       states_full(fit.model, prob, fit.x0), prob.split.est, self.dt, f_hz, self.couplings)
+
+    def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> tuple[list[Candidate], list]:
+        ctx = self.context(fit, f_hz)
         out = []
         for fam in self.families:
-            if fam not in REGISTRY:
+            family = REGISTRY.get(fam)
+            if family is None or family.stage != "structural":
                 continue
-            hyps = REGISTRY[fam].hypotheses(fit.model, st, outputs=self.prob.out_names, freq_hz=f_hz,
-                                              X=X)
+            hyps = family.hypotheses(ctx)
             best: Candidate | None = None
             for h in hyps:
-                wr = self.test(fit, h, X)
+                wr = self.test(fit, h, ctx.X)
                 if wr is None:
                     continue
                 ev = [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic, "p_value": wr.p_value,
@@ -236,7 +248,7 @@ class Diagnoser:
             if ee:
                 best.evidence.append(ee)
             out.append(best)
-        return out
+        return out, ctx.skipped
 
     def _xcorr_lag(self, fit: FitResult) -> dict:
         """Lag (samples, parabola-refined) that maximises the cross-correlation of the measured output
@@ -294,6 +306,45 @@ class Diagnoser:
         return {"test": f"equation_error_wald[{hyp.key}]", "statistic": w.statistic, "p_value": w.p_value,
                 "dof": w.dof, "coefficient": [float(b) for b in w.beta]}
 
+    def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
+        """The ``intersample`` pre-stage (see :mod:`.families.intersample`)."""
+        fam = REGISTRY["intersample"]
+        before, bic0 = val_resid(nominal, self.prob), bic_of(nominal)
+        rows, best = [], None
+        for chosen, alt in fam.alternatives(nominal.model):
+            try:
+                f = fit_output_error(alt, self.prob, start=dict(zip(nominal.names, nominal.theta)))
+            except InputError as exc:
+                rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
+                             "reason": f"refit failed: {exc}"})
+                continue
+            g = gain_ci(before, val_resid(f, self.prob), rng, self.n_boot)
+            dbic = bic_of(f) - bic0
+            ok = g["ci95"][0] > 0 and dbic < 0
+            rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
+                         "reason": "accepted" if ok else "validation error not lower with 95 % confidence"
+                         if g["ci95"][0] <= 0 else "BIC not lower", "p_family": None, "statistic": None})
+            _log(f"  intersample {chosen}: gain {g['relative']:+.3f} ci {g['ci95'][0]:+.3f}..{g['ci95'][1]:+.3f}, "
+                 f"dBIC {dbic:+.1f}")
+            if ok and (best is None or dbic < best[2]):
+                best = (chosen, f, dbic, g)
+        hist = {"stage": "intersample", "candidates": rows}
+        if best is None:
+            return nominal, None, hist
+        chosen, f, dbic, g = best
+        key, subject = fam.describe_choice(nominal.model, chosen)
+        finding = {"family": "intersample", **key,
+                   "description": f"{subject} {self._gain_text(g, dbic)}.", "evidence": [
+                       {"test": "held_out_gain", "statistic": g["relative"], "p_value": None, "ci95": g["ci95"]}],
+                   "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations()}
+        return f, finding, hist
+
+    @staticmethod
+    def _gain_text(g: dict, dbic: float) -> str:
+        return (f"lowers the validation free-run RMSE from {g['before']:.4g} to {g['after']:.4g} "
+                f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
+                f"{100 * g['ci95'][1]:.1f} %) and BIC by {-dbic:.1f}")
+
     def run(self, model: Model, start: dict | None = None) -> Diagnosis:
         prob = self.prob
         _log(f"fitting the nominal model ({len(model.free)} free parameters, output error)")
@@ -301,10 +352,11 @@ class Diagnoser:
         current = nominal
         tests0, f_cyc0 = residual_tests(nominal, prob, self.alpha)
         findings, history, fits = [], [], [nominal]
+        switched = "intersample" not in self.families   # the intersample choice is made at most once
         for it in range(self.max_findings):
-            tests, f_cyc = (tests0, f_cyc0) if it == 0 else residual_tests(current, prob, self.alpha)
+            tests, f_cyc = (tests0, f_cyc0) if current is nominal else residual_tests(current, prob, self.alpha)
             fisher = next(t for t in tests if t.name == "fisher_g")
-            cands = self.candidates(current, f_cyc / self.dt, fisher)
+            cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
             _log(f"iteration {it + 1}: {len(cands)} families tested, fired: "
                  f"{[k for k, v in fired.items() if v] or 'none'}")
@@ -317,11 +369,11 @@ class Diagnoser:
                     c.reason = "not significant after Holm correction"
             # refits are independent: run them in threads (the kernel releases the GIL)
             with ThreadPoolExecutor(max_workers=min(len(todo), os.cpu_count() or 1) or 1) as pool:
-                for c, f in zip(todo, pool.map(lambda c: self.refit(current, c), todo)):
+                for c, f in zip(todo, pool.map(lambda c: self.estimate(current, c), todo)):
                     c.fit = f
             for c in todo:
                 if c.fit is None:
-                    c.reason = c.reason or "no extension estimated (e.g. delay below a quarter sample)"
+                    c.reason = c.reason or "no extension estimated"
                     continue
                 c.gain = gain_ci(before, val_resid(c.fit, prob), rng, self.n_boot)
                 c.delta_bic = bic_of(c.fit) - bic0
@@ -331,16 +383,33 @@ class Diagnoser:
                     else "BIC not lower")
                 _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
                      f"{c.gain['ci95'][1]:+.3f}, dBIC {c.delta_bic:+.1f} -> {c.reason}")
-            history.append({"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]})
+            inter = None
+            if not switched:
+                _log("  intersample: the current model with the other input interpolation and a finer step")
+                f_is, finding_is, hist = self._intersample(current, np.random.default_rng([self.seed, 1000 + it]))
+                if finding_is is not None:
+                    inter = (f_is, finding_is)
+            rec = {"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]
+                   + (hist["candidates"] if not switched else []),
+                   "skipped": [{"family": f, "reason": r} for f, r in skipped]}
+            history.append(rec)
             acc = [c for c in cands if c.accepted]
-            if not acc:
+            best = min(acc, key=lambda c: c.delta_bic) if acc else None
+            # the intersample choice competes with the physical causes on the same footing (ΔBIC): on a
+            # misspecified model, foh vs zoh can look better by accident; the true cause explains more
+            if inter is not None and (best is None or inter[1]["delta_bic"] < best.delta_bic):
+                findings.append(inter[1])
+                current = inter[0]
+                fits.append(current)
+                switched = True
+                continue
+            if best is None:
                 break
-            best = min(acc, key=lambda c: c.delta_bic)
-            findings.append(self.finding(best))
+            findings.append(self.finding(best, [c for c in acc if c is not best]))
             current = best.fit
             fits.append(current)
         noise_tests = []
-        noise_fams = [f for f in self.families if f in NOISE_FAMILIES]
+        noise_fams = [f for f in self.families if f in NOISE_FAMILY_IDS]
         if noise_fams and len(findings) < self.max_findings:
             _log("noise families on the final model: " + ", ".join(noise_fams))
             nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed, n_boot=self.n_boot)
@@ -348,41 +417,27 @@ class Diagnoser:
         final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests)
 
-    def finding(self, c: Candidate) -> dict:
+    RUNNER_UP_DBIC = 10.0   # accepted alternatives within this ΔBIC of the finding are listed with it
+
+    def finding(self, c: Candidate, others: list[Candidate] | None = None) -> dict:
         h, fit = c.hyp, c.fit
         val = dict(zip(fit.names, fit.theta))
         sd = dict(zip(fit.names, fit.std))
-        f: dict = {"family": h.family}
-        g = c.gain
-        gtxt = (f"lowers the validation free-run RMSE from {g['before']:.4g} to {g['after']:.4g} "
-                f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
-                f"{100 * g['ci95'][1]:.1f} %) and BIC by {-c.delta_bic:.1f}")
+        key, subject = REGISTRY[h.family].describe(h, fit, val, sd)
+        f: dict = {"family": h.family, **key}
         if h.family == "input_delay":
-            d = float(fit.model.params[fit.model.delay])
-            f.update(delay_s=d, delay_samples=d / self.dt)
-            desc = f"The input acts with a dead time of {d:.4g} s ({d / self.dt:.2f} samples); delaying it {gtxt}."
-        elif h.family == "output_offset":
-            c0 = h.coefs[0]
-            f.update(output=h.output, value=val[c0], value_std=sd[c0], coefficient=val[c0])
-            desc = f"The measured output {h.output} carries a constant offset of {val[c0]:.4g}; removing it {gtxt}."
-        elif h.family == "periodic_disturbance":
-            a, b = val[h.coefs[0]], val[h.coefs[1]]
-            fname = next(iter(h.extra_params))
-            amp, ph = amplitude_phase(a, b)
-            fz = float(fit.model.params[fname])
-            f.update(equation=h.equation, frequency_hz=fz, frequency_std=sd.get(fname), amplitude=amp,
-                     phase_rad=ph, term=f"sin(2*pi*{fz:.6g}*t + {ph:.4g})", coefficient=amp)
-            desc = (f"A periodic disturbance of {fz:.4g} Hz and amplitude {amp:.4g} acts in the equation of "
-                    f"{h.equation}; adding it {gtxt}.")
-        else:
-            c0 = h.coefs[0]
-            f.update(equation=h.equation, term=h.term, coefficient=val[c0], coefficient_std=sd[c0])
-            what = {"offset": "A constant offset", "cubic_stiffness": f"A cubic stiffness term {h.term}",
-                    "coulomb_friction": f"Coulomb friction {h.term}",
-                    "quadratic_damping": f"Quadratic damping {h.term}"}.get(h.family, h.family)
-            desc = (f"{what} is missing from the equation of {h.equation}: adding {val[c0]:.4g}*{h.term} {gtxt}.")
+            f["delay_samples"] = f["delay_s"] / self.dt
+        g = c.gain
+        desc = f"{subject} {self._gain_text(g, c.delta_bic)}."
+        runners = []
+        for o in sorted(others or [], key=lambda o: o.delta_bic):
+            if o.delta_bic - c.delta_bic <= self.RUNNER_UP_DBIC:
+                runners.append({"family": o.hyp.family, "hypothesis": o.hyp.key, "delta_bic": o.delta_bic,
+                                "gain": o.gain, "separation": f"BIC {o.delta_bic - c.delta_bic:.1f} higher than the "
+                                f"finding's; validation gain {100 * o.gain['relative']:.1f} % vs "
+                                f"{100 * g['relative']:.1f} %"})
         f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic,
-                 extended_equations=fit.model.describe_equations())
+                 extended_equations=fit.model.describe_equations(), runners_up=runners)
         return f
 
 

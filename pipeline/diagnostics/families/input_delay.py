@@ -1,0 +1,51 @@
+"""``input_delay``: every input acts as u(t − d). Tested through the output sensitivity to d at
+d = 0; estimated by a profile search (weighted SSE over integer delays, a parabola through the best
+one and its neighbours for the fractional part), then one refit of all free parameters at that delay."""
+
+import numpy as np
+
+from ...fit import fit_output_error
+from ...model import fresh_name
+from .base import Context, Family, Hypothesis
+
+
+class InputDelay(Family):
+    id = "input_delay"
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        if ctx.model.delay is not None or not ctx.model.inputs:
+            return []
+        return [Hypothesis(self.id, "input_delay", coefs=[fresh_name(ctx.model, "input_delay_s")],
+                           info={"step": 0.5 * ctx.dt})]
+
+    def extend(self, model, hyp, values=None):
+        name = hyp.coefs[0]
+        return model.extend([], {name: float((values or {}).get(name, 0.0))}, delay=name)
+
+    def step(self, dg) -> float:
+        return 0.5 * dg.dt
+
+    def estimate(self, dg, fit, cand):
+        name = cand.hyp.coefs[0]
+        y = dg.prob.Y[dg.prob.split.est_slice()]
+        kmax = max(1, min(int(round(dg.max_delay / dg.dt)), len(y) // 4))
+        sse = []
+        for k in range(kmax + 1):
+            Yh = dg.sim_est(fit.model.extend([], {name: k * dg.dt}, delay=name), fit.x0)
+            sse.append(np.inf if Yh is None else float(np.sum(((y - Yh) * dg.w) ** 2)))
+        k0 = int(np.argmin(sse))
+        frac = 0.0
+        if 0 < k0 < kmax:
+            s0, s1, s2 = sse[k0 - 1], sse[k0], sse[k0 + 1]
+            den = s0 - 2 * s1 + s2
+            frac = float(np.clip(0.5 * (s0 - s2) / den, -0.5, 0.5)) if den > 0 else 0.0
+        d = (k0 + frac) * dg.dt
+        if d < 0.25 * dg.dt:
+            cand.reason = "best delay below a quarter sample"
+            return None
+        return fit_output_error(fit.model.extend([], {name: d}, delay=name), dg.prob)
+
+    def describe(self, hyp, fit, val, sd):
+        d = float(fit.model.params[fit.model.delay])
+        out = {"delay_s": d, "delay_std": sd.get(hyp.coefs[0])}
+        return out, f"The input acts with a dead time of {d:.4g} s; delaying it"

@@ -1,0 +1,82 @@
+"""``parameter_jump``: a free parameter changes abruptly at t_j, p → p + Δ·step(t − t_j).
+
+Hypotheses: every free nominal parameter × t_j on a grid of ``GRID`` times inside the estimation window
+(Δ tested at 0 with t_j fixed; the family's p-value is Bonferroni over all of them). Estimate: the best
+grid time, then a golden-section search on t_j between its neighbours (each point a refit of Δ and the
+free parameters), t_j fixed in the final refit."""
+
+import numpy as np
+
+from ...fit import fit_output_error
+from ...model import Rewrite
+from .base import Context, Family, Hypothesis, pname
+
+GRID = 16
+SEARCH_STEPS = 6
+
+
+class ParameterJump(Family):
+    id = "parameter_jump"
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        m = ctx.model
+        done = {rw.target for rw in m.param_rewrites}
+        t0, t1 = ctx.t[ctx.est[0]], ctx.t[ctx.est[1] - 1]
+        grid = t0 + (t1 - t0) * (np.arange(1, GRID + 1) / (GRID + 1))
+        out = []
+        for k in m.free:
+            if k not in m.nominal_params or k in done:
+                continue
+            d, tj = pname(m, "jump", k), pname(m, "jump_time", k)
+            for g in grid:
+                out.append(Hypothesis(self.id, f"{self.id}:{k}@{g:.4g}", coefs=[d], extra_params={tj: float(g)},
+                                      param_rewrites=[Rewrite(self.id, k, f"{k} + {d}*step(t - {tj})")],
+                                      fixed=(tj,), parameter=k,
+                                      info={"grid_step": float(grid[1] - grid[0]),
+                                            "scale": abs(m.params[k]) or 1.0}))
+        return out
+
+    def estimate(self, dg, fit, cand):
+        hyp = cand.hyp
+        tj_name = next(iter(hyp.extra_params))
+        step = hyp.info["grid_step"]
+        d0 = float(cand.wald.beta[0])
+
+        def refit(tj):
+            h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}})
+            try:
+                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, max_nfev=60)
+            except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
+                from ...errors import InputError
+                if isinstance(exc, InputError):
+                    return None
+                raise
+
+        a, b = hyp.extra_params[tj_name] - step, hyp.extra_params[tj_name] + step
+        gr = (np.sqrt(5) - 1) / 2
+        c, d = b - gr * (b - a), a + gr * (b - a)
+        fc, fd = refit(c), refit(d)
+        sse = lambda f: np.inf if f is None else f.sse_w
+        for _ in range(SEARCH_STEPS):
+            if sse(fc) < sse(fd):
+                b, d, fd = d, c, fc
+                c = b - gr * (b - a)
+                fc = refit(c)
+            else:
+                a, c, fc = c, d, fd
+                d = a + gr * (b - a)
+                fd = refit(d)
+        best = fc if sse(fc) < sse(fd) else fd
+        if best is None:
+            return None
+        return fit_output_error(best.model, dg.prob)
+
+    def describe(self, hyp, fit, val, sd):
+        k = hyp.parameter
+        tj_name = next(iter(hyp.extra_params))
+        tj = float(fit.model.params[tj_name])
+        before = float(fit.model.params[k])
+        after = before + val[hyp.coefs[0]]
+        return ({"parameter": k, "time_s": tj, "before": before, "after": after,
+                 "change_std": sd.get(hyp.coefs[0])},
+                f"The parameter {k} jumps from {before:.4g} to {after:.4g} at t = {tj:.4g} s; letting it change there")

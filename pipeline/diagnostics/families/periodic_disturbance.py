@@ -1,0 +1,72 @@
+"""``periodic_disturbance``: ``a*sin(2*pi*f*t) + b*cos(2*pi*f*t)`` in a dynamic equation, f from the
+residual periodogram peak (Fisher's g); f is refitted.
+
+Guards: the estimation window must hold at least two cycles of f (a slow drift is not "periodic at
+1.9e-6 Hz"), and f must not sit on an excited line of an input (a misfit of the input's own response is
+periodic wherever the input is: a periodic input makes any structural misfit periodic)."""
+
+import numpy as np
+
+from ...model import Term
+from .base import Context, Family, Hypothesis, pname
+
+MIN_CYCLES = 2.0
+LINE_RATIO = 10.0   # input periodogram at f over its median: above it, f is an excited input line
+
+
+def amplitude_phase(a: float, b: float) -> tuple[float, float]:
+    """a sin + b cos = A sin(ωt + φ)."""
+    return float(np.hypot(a, b)), float(np.arctan2(b, a))
+
+
+def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
+    """Is f (cycles/sample) a line of some input's periodogram (±2 bins, LINE_RATIO × its median)?"""
+    n = U.shape[0]
+    for j in range(U.shape[1]):
+        u = U[:, j] - U[:, j].mean()
+        if not np.any(u):
+            continue
+        per = np.abs(np.fft.rfft(u)) ** 2
+        k = int(round(f_cyc * n))
+        lo, hi = max(1, k - 2), min(len(per), k + 3)
+        if lo < hi and per[lo:hi].max() > LINE_RATIO * np.median(per[1:]):
+            return True
+    return False
+
+
+class PeriodicDisturbance(Family):
+    id = "periodic_disturbance"
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        f = ctx.freq_hz
+        if not f or f <= 0:
+            return []
+        span = ctx.t[ctx.est[1] - 1] - ctx.t[ctx.est[0]]
+        if f * span < MIN_CYCLES:
+            ctx.skipped.append((self.id, f"peak at {f:.3g} Hz is {f * span:.2g} cycles in the estimation window "
+                                         f"(at least {MIN_CYCLES:g} needed): a slow drift, not a periodic disturbance"))
+            return []
+        if on_input_line(ctx.U[slice(*ctx.est)], f * ctx.dt):
+            ctx.skipped.append((self.id, f"peak at {f:.4g} Hz sits on an excited input line: the misfit follows "
+                                         "the input, so it is the model's response, not a disturbance"))
+            return []
+        k = sum(1 for t in ctx.model.terms if t.family == self.id) // 2
+        out = []
+        for eq in ctx.structure.dynamic_eqs:
+            a, b, fq = (pname(ctx.model, "periodic", eq, f"sin{k}"), pname(ctx.model, "periodic", eq, f"cos{k}"),
+                        pname(ctx.model, "freq", eq, str(k)))
+            terms = [Term(self.id, "sin", eq, a, freq=fq), Term(self.id, "cos", eq, b, freq=fq)]
+            out.append(Hypothesis(self.id, f"periodic:{eq}", terms, [a, b], extra_params={fq: float(f)},
+                                  equation=eq, term=f"sin/cos(2*pi*{f:.4g}*t)"))
+        return out
+
+    def describe(self, hyp, fit, val, sd):
+        a, b = val[hyp.coefs[0]], val[hyp.coefs[1]]
+        fname = next(iter(hyp.extra_params))
+        amp, ph = amplitude_phase(a, b)
+        fz = float(fit.model.params[fname])
+        return ({"equation": hyp.equation, "frequency_hz": fz, "frequency_std": sd.get(fname), "amplitude": amp,
+                 "phase_rad": ph, "term": f"sin(2*pi*{fz:.6g}*t + {ph:.4g})", "coefficient": amp},
+                f"A periodic disturbance of {fz:.4g} Hz and amplitude {amp:.4g} acts in the equation of "
+                f"{hyp.equation}; adding it")
+

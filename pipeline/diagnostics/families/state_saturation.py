@@ -1,0 +1,50 @@
+"""``state_saturation``: a state cannot pass a limit (overflow, end stop): clamped to x ≤ L.
+
+Tested on a grid of L at the ``QUANTILES`` of the simulated state: a restoring term −c·maximum(x − L, 0)
+in the state's own equation is tested at c = 0 (a soft version of the limit, regular); the refit is
+the hard limit (the state clamped after every step) with L free, from the best grid L."""
+
+import numpy as np
+
+from ...model import Limit
+from .base import Context, Family, Hypothesis, additive, pname
+
+QUANTILES = (0.97, 0.9, 0.8)
+
+
+class StateSaturation(Family):
+    id = "state_saturation"
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        m = ctx.model
+        done = {lim.state for lim in m.limits}
+        sl = slice(*ctx.est)
+        out = []
+        for s in m.nominal_states:
+            if s in done:
+                continue
+            x = ctx.state(s)[sl]
+            if not np.all(np.isfinite(x)) or np.ptp(x) == 0:
+                continue
+            L = pname(m, "limit", s)
+            for q in QUANTILES:
+                lv = float(np.quantile(x, q))
+                h = additive(self.id, m, s, f"maximum({s} - {L}, 0)", name="limit_push")
+                h.key = f"{self.id}:{s}@{q}"
+                h.extra_params = {L: lv}
+                h.fixed = (L,)
+                h.null = {}
+                h.state = s
+                h.info = {"limit_name": L}
+                out.append(h)
+        return out
+
+    def refit_model(self, model, hyp, start):
+        L = hyp.info["limit_name"]
+        return model.extend([], {L: float(hyp.extra_params[L])}, limits=(Limit(self.id, hyp.state, hi=L),))
+
+    def describe(self, hyp, fit, val, sd):
+        L = hyp.info["limit_name"]
+        lv = float(fit.model.params[L])
+        return ({"state": hyp.state, "limit": lv, "limit_std": sd.get(L), "side": "upper"},
+                f"The state {hyp.state} cannot pass {lv:.4g} (an overflow or an end stop); adding the limit")

@@ -1,0 +1,55 @@
+"""``static_nonlinearity``: a missing static term ``c*g`` in a dynamic equation, g from a small library
+over the names the nominal equation already uses (its own physics, no coupling by default):
+
+* states z: ``z**2``, ``sqrt(z)`` (z > 0 on the simulated record: a square-root outflow), ``z*abs(z)``
+  (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)`` (s the
+  state's spread);
+* inputs u: ``u**2`` (a lamp's power ∝ V²), ``abs(u)`` (sign-changing inputs), ``sqrt(u)`` (u > 0);
+* products ``z*u`` of a state and an input of the equation.
+
+Terms other families own (``x**3``, ``sign(v)``, ``v*abs(v)``, the constant) are left to them."""
+
+import numpy as np
+
+from .base import Context, Family, Hypothesis, additive, present
+
+
+def library(ctx: Context, eq: str) -> list[str]:
+    m = ctx.model
+    used = m.equations[eq].names
+    states = [s for s in m.nominal_states if s in used]
+    inputs = [u for u in m.inputs if u in used]
+    sl = slice(*ctx.est)
+    out = []
+    for z in states:
+        x = ctx.state(z)[sl]
+        out.append(f"{z}**2")
+        if np.all(x > 0):
+            out.append(f"sqrt({z})")
+        if z not in ctx.structure.velocities or not ctx.structure.kin:
+            out.append(f"{z}*abs({z})")
+        s = float(np.std(x))
+        if s > 0:
+            out.append(f"tanh({z}/{s:.6g})")
+    for u in inputs:
+        x = ctx.U[sl, m.inputs.index(u)]
+        out.append(f"{u}**2")
+        if min(np.mean(x > 0), np.mean(x < 0)) >= 0.05:
+            out.append(f"abs({u})")
+        if np.all(x > 0):
+            out.append(f"sqrt({u})")
+    out += [f"{z}*{u}" for z in states for u in inputs]
+    return out
+
+
+class StaticNonlinearity(Family):
+    id = "static_nonlinearity"
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        return [additive(self.id, ctx.model, eq, g, name="static") for eq in ctx.structure.dynamic_eqs
+                for g in library(ctx, eq) if not present(ctx.model, g, eq)]
+
+    def describe(self, hyp, fit, val, sd):
+        c = val[hyp.coefs[0]]
+        return ({"equation": hyp.equation, "term": hyp.term, "coefficient": c, "coefficient_std": sd.get(hyp.coefs[0])},
+                f"A static term {hyp.term} is missing from the equation of {hyp.equation}: adding {c:.4g}*{hyp.term}")
