@@ -170,13 +170,9 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
     try:
         t0 = time.perf_counter()
         (tmp / "summary.json").write_text(dumps(ctx.summary))
-        metrics = {"nominal": ctx.summary["nominal"], "final": ctx.summary["final"],
-                   "models": ctx.summary["models"]}
-        (tmp / "metrics.json").write_text(dumps(metrics))
-        params = {"nominal": _clean(ctx.summary["nominal"]["params"]),
-                  "final": _clean(ctx.summary["final"]["params"]),
-                  "final_equations": dict(ctx.diag.final.model.describe_equations())}
-        (tmp / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+        from .tracking import dvc_metrics, dvc_params  # DVC conventions: numeric tree; params = inputs
+        (tmp / "metrics.json").write_text(dumps(dvc_metrics(_clean(ctx.summary))))
+        (tmp / "params.yaml").write_text(yaml.safe_dump(dvc_params(ctx.lc.canonical()), sort_keys=False))
         (tmp / "config.resolved.yaml").write_text(yaml.safe_dump(ctx.lc.canonical(), sort_keys=False))
         if html:
             from .report import render_report
@@ -184,7 +180,8 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
         manifest = {"run_id": ctx.run_id, "config": str(ctx.lc.path), "config_sha256": ctx.summary["config_sha256"],
                     "data": ctx.rec.path, "data_sha256": ctx.rec.sha256, "seed": ctx.lc.cfg.seed,
                     "git": _git_info(), "versions": _versions(), "platform": platform.platform(),
-                    "command": " ".join(sys.argv), "report_seconds": round(time.perf_counter() - t0, 3)}
+                    "command": " ".join(sys.argv),
+                    "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "report_seconds": round(time.perf_counter() - t0, 3)}
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         if target.exists():
             shutil.rmtree(target)
@@ -195,7 +192,12 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
     return target
 
 
-def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True) -> Path:
+def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True,
+        track: str | None = None) -> Path:
     lc = load_config(config_path)
     ctx = analyse(lc)
-    return write_run(ctx, Path(out) if out else None, html=html)
+    path = write_run(ctx, Path(out) if out else None, html=html)
+    if track:  # MLflow, after the folder is published (pipeline.tracking.mlflow_backend)
+        from .tracking.mlflow_backend import log_run
+        log_run(path, track)
+    return path
