@@ -48,12 +48,11 @@ def run_one(config: str, root: str, html: bool = False) -> BatchResult:
     console lines are captured (a batch prints its own progress)."""
     t0 = time.perf_counter()
     os.environ.setdefault("MPLBACKEND", "Agg")
-    os.environ["SYSID_PROGRESS"] = "0"
     from .config import load_config
     from .runs import analyse, write_run
     buf = io.StringIO()
     try:
-        with contextlib.redirect_stderr(buf):
+        with contextlib.redirect_stderr(buf), progress.silenced():
             lc = load_config(config)
             ctx = analyse(lc)
             path = write_run(ctx, Path(root) / ctx.run_id, html=html)

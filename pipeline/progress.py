@@ -44,6 +44,17 @@ def enable(on: bool | None = True, stream: IO[str] | None = None) -> None:
     _forced, _stream = on, stream
 
 
+@contextlib.contextmanager
+def silenced() -> Iterator[None]:
+    """No progress lines inside the block (a batch worker; the batch prints its own)."""
+    global _forced
+    old, _forced = _forced, False
+    try:
+        yield
+    finally:
+        _forced = old
+
+
 def enabled() -> bool:
     if _forced is not None:
         return _forced
