@@ -157,7 +157,7 @@ def bar(iterable: Iterable[T], total: int | None = None, label: str = "") -> Ite
         if now - last >= BAR_INTERVAL_S and (total is None or k < total):
             last = now
             emit(f"{prefix}{label} {_bar_text(k, total)} ({_fmt_s(now - t0)})")
-    if st is not None:
+    if st is not None and st.items is None:  # the stage's first loop gives its item count
         st.count(k)
     emit(f"{prefix}{label} {_bar_text(k, total)} ({_fmt_s(time.monotonic() - t0)})")
 
