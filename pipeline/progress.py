@@ -137,9 +137,11 @@ def _current() -> Stage | None:
     return stack[-1] if stack else None
 
 
-def bar(iterable: Iterable[T], total: int | None = None, label: str = "") -> Iterator[T]:
+def bar(iterable: Iterable[T], total: int | None = None, label: str = "", always_final: bool = True) -> Iterator[T]:
     """Yield from ``iterable``, printing ``[stage] label [####....] k/total (t s)`` at most every
-    ``BAR_INTERVAL_S`` and once at the end. Counts the items into the enclosing stage."""
+    ``BAR_INTERVAL_S`` and once at the end (with ``always_final=False`` only when the loop took longer
+    than ``BAR_INTERVAL_S``: inner loops that are usually fast). Counts the items into the enclosing
+    stage."""
     if total is None:
         try:
             total = len(iterable)  # type: ignore[arg-type]
@@ -159,7 +161,8 @@ def bar(iterable: Iterable[T], total: int | None = None, label: str = "") -> Ite
             emit(f"{prefix}{label} {_bar_text(k, total)} ({_fmt_s(now - t0)})")
     if st is not None and st.items is None:  # the stage's first loop gives its item count
         st.count(k)
-    emit(f"{prefix}{label} {_bar_text(k, total)} ({_fmt_s(time.monotonic() - t0)})")
+    if always_final or time.monotonic() - t0 >= BAR_INTERVAL_S:
+        emit(f"{prefix}{label} {_bar_text(k, total)} ({_fmt_s(time.monotonic() - t0)})")
 
 
 def _bar_text(k: int, total: int | None) -> str:

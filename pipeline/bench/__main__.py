@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.structures"]
+SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.structures", "pipeline.bench.report"]
 
 
 def main(argv=None) -> int:
