@@ -16,14 +16,15 @@ from .. import progress
 
 # ------------------------------------------------------------------ display decimation
 
-def envelope(t: np.ndarray, y: np.ndarray, max_points: int = 4000):
+def envelope(t: np.ndarray, y: np.ndarray, max_points: int = 4000, bins: int = 600):
     """Min/max envelope for drawing a long trace: ``None`` when ``len(y) <= max_points`` (draw it
-    as is), else ``(t_bin, lo, hi)`` over ``max_points // 2`` bins of consecutive samples, so every
-    sample's value lies inside the drawn band (no aliasing, unlike taking every k-th sample)."""
+    as is), else ``(t_bin, lo, hi)`` over ``bins`` bins of consecutive samples, so every sample's value
+    lies inside the drawn band (no aliasing, unlike taking every k-th sample). ``bins`` ≈ the axes'
+    width in pixels: narrower bins would be thinner than a pixel and vanish under antialiasing."""
     n = len(y)
     if n <= max_points:
         return None
-    nb = max(1, max_points // 2)
+    nb = max(1, min(bins, n))
     edges = np.linspace(0, n, nb + 1).astype(int)
     lo = np.minimum.reduceat(y, edges[:-1])
     hi = np.maximum.reduceat(y, edges[:-1])

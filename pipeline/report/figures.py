@@ -61,11 +61,11 @@ def _trace(ax, t, y, color, lab, *, lw=0.8, measured=False):
         ax.plot(t, y, color=color, lw=lw, label=lab, zorder=3 if measured else 4)
         return
     tb, lo, hi = env
-    if measured:
-        ax.fill_between(tb, lo, hi, color="0.55", lw=0, label=f"{lab} (min/max envelope)", zorder=2)
+    if measured:  # on top, slightly transparent: model outlines show where they leave the measurement
+        ax.fill_between(tb, lo, hi, color="0.55", alpha=0.8, lw=0, label=f"{lab} (min/max envelope)", zorder=5)
     else:
-        ax.plot(tb, hi, color=color, lw=0.7, label=f"{lab} (envelope)", zorder=4)
-        ax.plot(tb, lo, color=color, lw=0.7, zorder=4)
+        ax.plot(tb, hi, color=color, lw=0.6, label=lab, zorder=3)
+        ax.plot(tb, lo, color=color, lw=0.6, zorder=3)
 
 
 def _shade(ax, t, split):
@@ -111,8 +111,12 @@ def compare(ctx, fits: list, labels: list[str], units: dict[str, str], zoom: int
         az.set_title(f"zoom: {b - a} samples where '{labels[0]}' errs most", fontsize=8.5)
         ax.set_xlabel("time [s]")
         az.set_xlabel("time [s]")
-    _legend_above(axes[0, 0], ncol=len(fits) + 1)
-    fig.tight_layout()
+    h, lab = axes[0, 1].get_legend_handles_labels()
+    if analysis.envelope(t, prob.Y[sl, 0]) is not None:
+        h, lab = axes[0, 0].get_legend_handles_labels()
+    top = 1 - 0.45 / (2.9 * ny + 0.4)
+    fig.tight_layout(rect=(0, 0, 1, top))
+    fig.legend(h, lab, loc="upper left", bbox_to_anchor=(0.0, 1.0), ncol=min(4, len(h)), frameon=False, fontsize=8.5)
     return _png(fig)
 
 
