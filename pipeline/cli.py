@@ -20,12 +20,13 @@ import traceback
 # modules that add subcommands (each one file, one line here)
 COMMAND_MODULES: list[str] = [
     "pipeline.assignment.cli",
+    "pipeline.store_cli",
 ]
 
 
 def _run_command(args: argparse.Namespace) -> int:
     from .runs import run
-    path = run(args.config, args.out, html=args.cmd == "report")
+    path = run(args.config, args.out, html=args.cmd == "report", track=args.track)
     if args.cmd == "report":
         print(f"report: {path / 'report.html'}")
     else:
@@ -36,6 +37,8 @@ def _run_command(args: argparse.Namespace) -> int:
 def build_parser() -> tuple[argparse.ArgumentParser, dict]:
     ap = argparse.ArgumentParser(prog="sysid", description="What the simulation gets wrong, why, the fix "
                                  "and its worth.")
+    from . import __version__
+    ap.add_argument("--version", action="version", version=f"sysid {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True)
     handlers = {}
     for name, helptext in (("report", "run the pipeline and write the run folder with report.html"),
@@ -43,6 +46,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict]:
         p = sub.add_parser(name, help=helptext)
         p.add_argument("config", help="YAML config (see configs/demo.yaml)")
         p.add_argument("--out", help="run folder to write (default reports/<run-id>)")
+        p.add_argument("--track", nargs="?", const="default", metavar="URI",
+                       help="log the run to MLflow (default sqlite:///reports/mlruns.db; extra [mlflow])")
         handlers[name] = _run_command
     for modname in COMMAND_MODULES:
         handlers.update(importlib.import_module(modname).register(sub))

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import criteria
+from . import criteria, progress
 from .config import LoadedConfig
 from .data import Record, Split
 from .errors import ConfigError, EstimationError, InputError
@@ -255,9 +255,9 @@ class Comparer:
             if out.sindy["terms"]:
                 cands["sindy"] = out.sindy["terms"]
         ests = self.lc.cfg.estimator_list()
-        for name, terms in cands.items():
-            for est, opts in ests:
-                _log(f"{name} with {est}")
+        pairs = [(name, terms, est, opts) for name, terms in cands.items() for est, opts in ests]
+        with progress.stage("structures", total=len(pairs)):
+            for name, terms, est, opts in progress.bar(pairs, len(pairs), "candidates × estimators"):
                 out.results.append(self.evaluate(name, terms, est, opts))
         if sc.takagi_sugeno is not None:
             out.takagi_sugeno, res = self.run_takagi_sugeno()

@@ -194,6 +194,10 @@ class Config(_Strict):
     # estimators run on every candidate structure: names or {name: {options}}
     estimators: Annotated[list[Union[StrictStr, dict[str, Union[dict[str, object], None]]]],
                           Field(max_length=50)] = Field(default_factory=lambda: ["ls"])
+    # report (issue 10): parameter uncertainty of the final grey-box model ("mcmc": emcee posterior
+    # overlaid on the Gauss ellipses) and the units of signals for axis labels, e.g. {x: m, u: N}
+    uncertainty: Literal["gauss", "mcmc"] = "gauss"
+    units: dict[str, StrictStr] = Field(default_factory=dict)
 
     @field_validator("estimators")
     @classmethod
@@ -235,7 +239,11 @@ class LoadedConfig:
         return p if p.is_absolute() else (self.path.parent / p)
 
     def canonical(self) -> dict:
-        return self.cfg.model_dump(mode="json")
+        d = self.cfg.model_dump(mode="json")
+        for key, default in (("uncertainty", "gauss"), ("units", {})):  # report-only keys at their
+            if d.get(key) == default:                                   # defaults keep run ids stable
+                d.pop(key)
+        return d
 
     def sha256(self) -> str:
         blob = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":")).encode()

@@ -220,13 +220,9 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
         t0 = time.perf_counter()
         (tmp / "summary.json").write_text(dumps(ctx.summary))
         kill_point("after_summary_written")
-        metrics = {"nominal": ctx.summary["nominal"], "final": ctx.summary["final"],
-                   "models": ctx.summary["models"]}
-        (tmp / "metrics.json").write_text(dumps(metrics))
-        params = {"nominal": _clean(ctx.summary["nominal"]["params"]),
-                  "final": _clean(ctx.summary["final"]["params"]),
-                  "final_equations": dict(ctx.diag.final.model.describe_equations())}
-        (tmp / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+        from .tracking import dvc_metrics, dvc_params  # DVC conventions: numeric tree; params = inputs
+        (tmp / "metrics.json").write_text(dumps(dvc_metrics(_clean(ctx.summary))))
+        (tmp / "params.yaml").write_text(yaml.safe_dump(dvc_params(ctx.lc.canonical()), sort_keys=False))
         (tmp / "config.resolved.yaml").write_text(yaml.safe_dump(ctx.lc.canonical(), sort_keys=False))
         ext = extended_config(ctx.lc.canonical(), ctx.diag.final.model, ctx.lc.path, ctx.lc.data_path, target)
         (tmp / "extended.yaml").write_text("# the final model of run " + ctx.run_id + " as a runnable config\n"
@@ -237,7 +233,8 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
         manifest = {"run_id": ctx.run_id, "config": str(ctx.lc.path), "config_sha256": ctx.summary["config_sha256"],
                     "data": ctx.rec.path, "data_sha256": ctx.rec.sha256, "seed": ctx.lc.cfg.seed,
                     "git": _git_info(), "versions": _versions(), "platform": platform.platform(),
-                    "command": " ".join(sys.argv), "report_seconds": round(time.perf_counter() - t0, 3)}
+                    "command": " ".join(sys.argv),
+                    "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "report_seconds": round(time.perf_counter() - t0, 3)}
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         finalize(tmp, ctx.run_id)
         publish(tmp, resolved)
@@ -247,8 +244,10 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
     return target
 
 
-def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True) -> Path:
-    """Load the config, check ``--out`` (before any analysis), analyse, write the run folder."""
+def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True,
+        track: str | None = None) -> Path:
+    """Load the config, check ``--out`` (before any analysis), analyse, write the run folder, and log it
+    to MLflow when ``track`` is a tracking URI."""
     lc = load_config(config_path)
     inputs = input_paths(lc)
     if out is not None:
@@ -261,4 +260,8 @@ def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = 
         if data_sha is not None:
             check_target(default_target(run_id_of(lc, data_sha)), inputs=inputs, default=True)
     ctx = analyse(lc)
-    return write_run(ctx, Path(out) if out is not None else None, html=html)
+    path = write_run(ctx, Path(out) if out is not None else None, html=html)
+    if track:  # MLflow, after the folder is published (pipeline.tracking.mlflow_backend)
+        from .tracking.mlflow_backend import log_run
+        log_run(path, track)
+    return path

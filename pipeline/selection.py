@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from pipeline import progress
 from pipeline.errors import InputError
 
 SCORE_KINDS = {
@@ -100,7 +101,7 @@ def cross_validate(
         raise InputError(f"cross_validate: kind = {kind!r}; expected one of {sorted(SCORE_KINDS)}")
     folds = blocked_folds(n, k, gap, seed)
     scores = []
-    for train, val in folds:
+    for train, val in progress.bar(folds, len(folds), "CV folds", always_final=False):
         model = fit_fn(train)
         s = float(score_fn(model, val))
         scores.append(s)

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.structures",
-            "pipeline.bench.assignment"]
+            "pipeline.bench.assignment", "pipeline.bench.report"]
 
 
 def main(argv=None) -> int:

@@ -1,58 +1,140 @@
-"""HTML report: Jinja2 template (autoescape on) with inline matplotlib figures."""
+"""HTML report v2: one self-contained, deterministic file (Jinja2, autoescape on; figures as inline
+PNG; no script, no external resource). Sections: first screen (answer in words + one figure), data,
+measured vs simulated, residual analysis, why/fix/worth, model comparison and recommendation,
+parameters and uncertainty, configuration and provenance.
+"""
 
 from __future__ import annotations
 
-import sys
-
+import matplotlib.pyplot as plt
+import numpy as np
+import yaml
 from jinja2 import Environment, PackageLoader, select_autoescape
 
-from . import figures
+from .. import progress
+from ..diagnostics.engine import fit_percent, rmse
+from . import analysis, figures, view
+
+ZOOM = 400              # samples in the zoom window beside a long trace
+BAND_DRAWS = 40         # parameter draws for the response band
 
 
-def _fmt(x, digits: int = 4):
-    if x is None:
-        return "–"
-    if isinstance(x, (int, float)):
-        return f"{x:.{digits}g}"
-    return str(x)
+def _fit_rows(ctx, labels) -> list[dict]:
+    prob = ctx.prob
+    sl = prob.split.val_slice()
+    es = prob.split.est_slice()
+    return [{"name": lab, "val_fit": fit_percent(prob.Y[sl], f.Yhat[sl]), "val_rmse": rmse(prob.Y[sl] - f.Yhat[sl]),
+             "est_fit": fit_percent(prob.Y[es], f.Yhat[es]), "n_params": f.n_params}
+            for f, lab in zip(ctx.diag.fits, labels)]
+
+
+def _chain_labels(ctx) -> list[str]:
+    names = [m["name"] for m in ctx.summary.get("models", []) if m.get("estimator") == "output_error_ls"]
+    n = len(ctx.diag.fits)
+    return (names + [f"model {k}" for k in range(len(names), n)])[:n]
+
+
+def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
+    diag, prob = ctx.diag, ctx.prob
+    fits = diag.fits
+    figs: dict = {}
+    jobs = [("first", lambda: figures.compare(ctx, [diag.nominal, diag.final], [labels[0], labels[-1]], units, ZOOM)),
+            ("overview", lambda: figures.overview(ctx, units)),
+            ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)),
+            ("resid", lambda: figures.residuals(ctx, [diag.nominal, diag.final] if len(fits) > 1 else [diag.nominal],
+                                                [labels[0], labels[-1]] if len(fits) > 1 else [labels[0]], units)),
+            ("corr_nominal", lambda: figures.correlations(ctx, diag.nominal, alpha))]
+    if len(fits) > 1:
+        jobs.append(("corr_final", lambda: figures.correlations(ctx, diag.final, alpha)))
+    if ctx.model.inputs:
+        es = prob.split.est_slice()
+        u = prob.U[es, 0]
+
+        def emm():
+            items = [(labels[0], analysis.error_model(diag.nominal.resid_est[:, 0], u, ctx.rec.dt))]
+            if len(fits) > 1:
+                items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, 0], u, ctx.rec.dt)))
+            return figures.error_model_plot(items, ctx.model.inputs[0], prob.out_names[0], units)
+        jobs.append(("error_model", emm))
+    jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal)))
+    for k, fit in enumerate(fits[1:]):
+        jobs.append((f"finding_{k}", lambda k=k, fit=fit: figures.compare(ctx, [fits[k], fit], [labels[k], labels[k + 1]],
+                                                                          units, ZOOM)))
+    st = ctx.summary.get("structures")
+    if st:
+        if st.get("frols"):
+            jobs.append(("err", lambda: figures.err_chart(st["frols"])))
+        if st.get("takagi_sugeno"):
+            jobs.append(("ts", lambda: figures.ts_memberships(st["takagi_sugeno"], units)))
+        rls = [r for r in ctx.comparison.results if "theta_trajectory" in r.extra]
+        best = [r for r in rls if r.name == st.get("selected")] or rls
+        if best:
+            jobs.append(("rls", lambda: figures.rls_trajectories(best[0])))
+    for key, fn in progress.bar(jobs, len(jobs), "figures"):
+        figs[key] = fn()
+    return figs
+
+
+def _uncertainty(ctx, units: dict) -> dict:
+    """Ellipses of the final model (with the emcee posterior when ``uncertainty: mcmc``) and its
+    response band from Gauss (or posterior) parameter draws."""
+    diag, cfg = ctx.diag, ctx.lc.cfg
+    out: dict = {"posterior": None, "ellipses_final": None, "band": None, "band_what": None}
+    post = None
+    if cfg.uncertainty == "mcmc":
+        with progress.stage("mcmc"):
+            post = analysis.mcmc_posterior(diag.final, ctx.prob, cfg.seed)
+        out["posterior"] = post
+    if len(diag.fits) > 1 or post is not None:
+        out["ellipses_final"] = figures.corner(diag.final, posterior=post)
+    if post is not None and len(post.samples) >= BAND_DRAWS:
+        idx = np.linspace(0, len(post.samples) - 1, BAND_DRAWS).astype(int)
+        draws, what = post.samples[idx], "emcee posterior draws"
+    else:
+        draws, what = analysis.gauss_draws(diag.final, BAND_DRAWS, cfg.seed), "Gauss N(θ̂, P) draws"
+    if draws is not None:
+        lohi = analysis.response_band(diag.final, ctx.prob, draws)
+        if lohi is not None:
+            out["band"] = figures.band(ctx, diag.final, lohi, units, ZOOM, what)
+            out["band_what"] = what
+    return out
+
+
+def _provenance(ctx) -> dict:
+    from ..runs import _git_info, _versions
+    return {"config_yaml": yaml.safe_dump(ctx.lc.canonical(), sort_keys=False, allow_unicode=True),
+            "config_path": str(ctx.lc.path), "data_path": str(ctx.rec.path), "data_sha256": ctx.rec.sha256,
+            "git": _git_info(), "versions": _versions()}
 
 
 def render_report(ctx) -> str:
-    print("[report] drawing figures", file=sys.stderr, flush=True)
+    """The report of one analysed run (``runs.RunContext``) as an HTML string."""
+    s = ctx.summary
+    cfg = ctx.lc.cfg
+    units = dict(getattr(cfg, "units", {}) or {})
+    alpha = cfg.diagnose.alpha
+    labels = _chain_labels(ctx)
+    with progress.stage("report"), plt.rc_context(figures.RC):
+        figs = _figures(ctx, units, alpha, labels)
+        unc = _uncertainty(ctx, units)
     diag = ctx.diag
-    alpha = ctx.lc.cfg.diagnose.alpha
-    figs = {"overview": figures.overview(ctx),
-            "compare_nominal": figures.compare(ctx, [diag.nominal], ["nominal"],
-                                               "measured vs nominal model"),
-            "resid_nominal": figures.residuals(ctx, diag.nominal, "nominal model"),
-            "corr_nominal": figures.correlations(ctx, diag.nominal, alpha),
-            "ellipses_nominal": figures.ellipses(diag.nominal)}
-    finding_figs = []
-    for k, fit in enumerate(diag.fits[1:]):
-        finding_figs.append({
-            "compare": figures.compare(ctx, [diag.fits[k], fit], ["before", "after"],
-                                       f"finding {k + 1}: measured vs extended model"),
-            "corr": figures.correlations(ctx, fit, alpha)})
-    figs["ellipses_final"] = figures.ellipses(diag.final) if diag.findings else None
-    params = []
-    for name in diag.nominal.names:
-        i = diag.nominal.names.index(name)
-        params.append({"name": name, "nominal": diag.nominal.theta[i], "nominal_std": diag.nominal.std[i]})
-    final_params = [{"name": n, "value": v, "std": s}
-                    for n, v, s in zip(diag.final.names, diag.final.theta, diag.final.std)]
-    st = ctx.summary.get("structures")
-    if st:
-        figs["err"] = figures.err_chart(st["frols"]) if st.get("frols") else None
-        figs["ts"] = figures.ts_memberships(st["takagi_sugeno"]) if st.get("takagi_sugeno") else None
-        rls = [r for r in ctx.comparison.results if "theta_trajectory" in r.extra]
-        best = [r for r in rls if r.name == st.get("selected")] or rls
-        figs["rls"] = figures.rls_trajectories(best[0]) if best else None
-    structure_rows = [m for m in ctx.summary["models"] if "cv_rmse_one_step" in m]
-    structure_rows.sort(key=lambda m: (m["cv_mean"] is None, m["cv_mean"] if m["cv_mean"] is not None else 0))
+    nominal_tests, final_tests = view.split_tests(s.get("diagnosis") or {})
     env = Environment(loader=PackageLoader("pipeline.report", "templates"), autoescape=select_autoescape(["html"]))
-    env.filters["fmt"] = _fmt
+    env.filters["sig"] = view.sig
+    env.filters["text"] = view.numbers_in_text
+    env.filters["pct"] = lambda x, d=3: "–" if x is None else view.sig(100 * x, d)
+    env.globals["plural"] = view.plural
     tpl = env.get_template("report.html")
-    return tpl.render(s=ctx.summary, cfg=ctx.lc.cfg, figs=figs, finding_figs=finding_figs, params=params,
-                      final_params=final_params, nominal_eqs=ctx.model.describe_equations(),
-                      final_eqs=diag.final.model.describe_equations(), log=ctx.rec.log,
-                      structure_rows=structure_rows)
+    post = unc["posterior"]
+    return tpl.render(
+        s=s, cfg=cfg, figs=figs, unc=unc, first=view.first_screen(s), rec=view.recommendation(s),
+        labels=labels, fit_rows=_fit_rows(ctx, labels), nominal_tests=nominal_tests, final_tests=final_tests,
+        nominal_params=list(zip(diag.nominal.names, diag.nominal.theta, diag.nominal.std)),
+        final_params=list(zip(diag.final.names, diag.final.theta, diag.final.std)),
+        post_rows=None if post is None else [
+            (n, float(np.mean(post.samples[:, i])), float(np.std(post.samples[:, i], ddof=1)),
+             *map(float, np.percentile(post.samples[:, i], [2.5, 97.5])))
+            for i, n in enumerate(post.names)],
+        post=post, nominal_eqs=ctx.model.describe_equations(), final_eqs=diag.final.model.describe_equations(),
+        log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
+        band_draws=BAND_DRAWS)

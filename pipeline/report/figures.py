@@ -1,5 +1,10 @@
-"""Report figures (matplotlib, Agg). Each returns a PNG as base64; PNG metadata is stripped of the
-software version so the bytes depend only on the data."""
+"""Report figures (matplotlib, Agg). Each returns a PNG as base64; the PNG metadata carries no
+software version or date, so the bytes depend only on the data.
+
+Readability rules (issue 10): tick labels ≥ 8 pt at 100 dpi shown at ~1:1 (figures ≤ 9.6 in wide in a
+1000 px column), legends above the axes (never over data), axis units from the config's ``units``,
+long traces as a min/max envelope beside a full-resolution zoom window.
+"""
 
 from __future__ import annotations
 
@@ -14,158 +19,281 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from ..diagnostics import stats as rstats  # noqa: E402
+from . import analysis  # noqa: E402
 
 CHI2_2_95 = float(stats.chi2.ppf(0.95, 2))  # 5.991
+WIDTH_IN = 9.6
+DPI = 100
+COLORS = ("tab:red", "tab:green", "tab:purple", "tab:brown", "tab:cyan", "tab:olive")
+RC = {"font.size": 9, "axes.titlesize": 9.5, "axes.labelsize": 9, "xtick.labelsize": 8.5,
+      "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "svg.hashsalt": "sysid", "path.simplify": True}
 
 
 def _png(fig) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight", metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight", metadata={"Software": None})
     plt.close(fig)
     return base64.b64encode(buf.getvalue()).decode()
 
 
+def _fig(*args, **kw):
+    """``plt.subplots``; the caller (``render_report``) holds ``plt.rc_context(RC)``."""
+    return plt.subplots(*args, **kw)
+
+
+def label(name: str, units: dict[str, str]) -> str:
+    u = units.get(name)
+    return f"{name} [{u}]" if u else f"{name} [data units]"
+
+
+def _legend_above(ax, ncol: int = 4) -> None:
+    h, lab = ax.get_legend_handles_labels()
+    if h:
+        ax.legend(h, lab, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=min(ncol, len(h)), frameon=False,
+                  fontsize=8.5, borderaxespad=0.0)
+
+
+def _trace(ax, t, y, color, lab, *, lw=0.8, measured=False):
+    """A line, or for a long trace its min/max envelope (filled for the measurement, outlined for a
+    model) so the measured signal stays visible under the simulations."""
+    env = analysis.envelope(t, y)
+    if env is None:
+        ax.plot(t, y, color=color, lw=lw, label=lab, zorder=3 if measured else 4)
+        return
+    tb, lo, hi = env
+    if measured:  # on top, slightly transparent: model outlines show where they leave the measurement
+        ax.fill_between(tb, lo, hi, color="0.55", alpha=0.8, lw=0, label=f"{lab} (min/max envelope)", zorder=5)
+    else:
+        ax.plot(tb, hi, color=color, lw=0.6, label=lab, zorder=3)
+        ax.plot(tb, lo, color=color, lw=0.6, zorder=3)
+
+
 def _shade(ax, t, split):
-    ax.axvspan(t[split.est[0]], t[split.est[1] - 1], color="tab:blue", alpha=0.06, label="estimation")
-    ax.axvspan(t[split.val[0]], t[split.val[1] - 1], color="tab:orange", alpha=0.08, label="validation")
+    ax.axvspan(t[split.est[0]], t[split.est[1] - 1], color="tab:blue", alpha=0.07, label="estimation part")
+    ax.axvspan(t[split.val[0]], t[split.val[1] - 1], color="tab:orange", alpha=0.10, label="validation part")
 
 
-def overview(ctx) -> str:
+def overview(ctx, units: dict[str, str]) -> str:
+    """Every input and output over the whole record with the estimation/validation parts shaded."""
     t, prob = ctx.prob.t, ctx.prob
-    nu = prob.U.shape[1] if ctx.model.inputs else 0
-    fig, axes = plt.subplots(nu + len(prob.out_names), 1, figsize=(9, 1.8 * (nu + len(prob.out_names))),
-                             sharex=True, squeeze=False)
-    for j, name in enumerate(ctx.model.inputs):
-        axes[j, 0].plot(t, prob.U[:, j], lw=0.5, color="k")
-        axes[j, 0].set_ylabel(f"input {name}")
-        _shade(axes[j, 0], t, prob.split)
-    for i, name in enumerate(prob.out_names):
-        ax = axes[nu + i, 0]
-        ax.plot(t, prob.Y[:, i], lw=0.5, color="k")
-        ax.set_ylabel(f"output {name}")
+    names = [("input", n, prob.U[:, j]) for j, n in enumerate(ctx.model.inputs)] + \
+            [("output", n, prob.Y[:, i]) for i, n in enumerate(prob.out_names)]
+    fig, axes = _fig(len(names), 1, figsize=(WIDTH_IN, 1.9 * len(names) + 0.4), sharex=True, squeeze=False)
+    for ax, (kind, n, y) in zip(axes[:, 0], names):
         _shade(ax, t, prob.split)
-    axes[0, 0].legend(loc="upper right", fontsize=7)
+        _trace(ax, t, y, "k", f"{kind} {n}", measured=True)
+        ax.set_ylabel(label(n, units))
+    _legend_above(axes[0, 0])
     axes[-1, 0].set_xlabel("time [s]")
     return _png(fig)
 
 
-def compare(ctx, fits: list, labels: list[str], title: str) -> str:
-    """Measured vs free-run simulation on the validation data."""
+def compare(ctx, fits: list, labels: list[str], units: dict[str, str], zoom: int = 400) -> str:
+    """Measured vs free-run simulation on the validation part: the whole part (envelope when long)
+    and, beside it, a full-resolution window of ``zoom`` samples where the first model errs most."""
     prob = ctx.prob
     sl = prob.split.val_slice()
     t = prob.t[sl]
-    fig, axes = plt.subplots(len(prob.out_names), 1, figsize=(9, 2.6 * len(prob.out_names)), squeeze=False)
+    ny = len(prob.out_names)
+    fig, axes = _fig(ny, 2, figsize=(WIDTH_IN, 2.9 * ny + 0.4), squeeze=False,
+                     gridspec_kw={"width_ratios": [2.0, 1.0]})
     for i, name in enumerate(prob.out_names):
-        ax = axes[i, 0]
-        ax.plot(t, prob.Y[sl, i], color="k", lw=0.8, label="measured")
-        for fit, lab, col in zip(fits, labels, ("tab:red", "tab:green", "tab:purple", "tab:brown")):
-            ax.plot(t, fit.Yhat[sl, i], color=col, lw=0.8, label=lab)
-        ax.set_ylabel(name)
-    axes[0, 0].set_title(title, fontsize=10)
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("time [s] (validation data, free-run simulation)")
+        y = prob.Y[sl, i]
+        a, b = analysis.zoom_window(y - fits[0].Yhat[sl, i], zoom)
+        ax, az = axes[i, 0], axes[i, 1]
+        _trace(ax, t, y, "k", "measured", measured=True)
+        az.plot(t[a:b], y[a:b], color="k", lw=1.4, label="measured", zorder=3)
+        for fit, lab, col in zip(fits, labels, COLORS):
+            _trace(ax, t, fit.Yhat[sl, i], col, lab)
+            az.plot(t[a:b], fit.Yhat[sl, i][a:b], color=col, lw=0.9, label=lab, zorder=4)
+        ax.axvspan(t[a], t[b - 1], color="gold", alpha=0.25, lw=0, zorder=1)
+        ax.set_ylabel(label(name, units))
+        az.set_title(f"zoom: {b - a} samples where '{labels[0]}' errs most", fontsize=8.5)
+        ax.set_xlabel("time [s]")
+        az.set_xlabel("time [s]")
+    h, lab = axes[0, 1].get_legend_handles_labels()
+    if analysis.envelope(t, prob.Y[sl, 0]) is not None:
+        h, lab = axes[0, 0].get_legend_handles_labels()
+    top = 1 - 0.45 / (2.9 * ny + 0.4)
+    fig.tight_layout(rect=(0, 0, 1, top))
+    fig.legend(h, lab, loc="upper left", bbox_to_anchor=(0.0, 1.0), ncol=min(4, len(h)), frameon=False, fontsize=8.5)
     return _png(fig)
 
 
-def residuals(ctx, fit, label: str) -> str:
+def residuals(ctx, fits: list, labels: list[str], units: dict[str, str]) -> str:
+    """Free-run simulation error y − ŷ over the whole record for each model."""
     prob = ctx.prob
-    r = prob.Y - fit.Yhat
-    fig, ax = plt.subplots(1, 1, figsize=(9, 2.2))
+    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.6))
     _shade(ax, prob.t, prob.split)
-    ax.plot(prob.t, r[:, 0], lw=0.5, color="k")
+    for fit, lab, col in zip(fits, labels, COLORS):
+        r = prob.Y[:, 0] - fit.Yhat[:, 0]
+        env = analysis.envelope(prob.t, r)
+        if env is None:
+            ax.plot(prob.t, r, lw=0.6, color=col, label=lab)
+        else:
+            ax.fill_between(env[0], env[1], env[2], color=col, alpha=0.45, lw=0, label=f"{lab} (min/max envelope)")
     ax.axhline(0, color="grey", lw=0.5)
-    ax.set_ylabel(f"y - ŷ ({prob.out_names[0]})")
-    ax.set_title(f"free-run simulation error, {label}", fontsize=10)
+    ax.set_ylabel(f"y − ŷ: {label(prob.out_names[0], units)}")
     ax.set_xlabel("time [s]")
+    _legend_above(ax)
     return _png(fig)
 
 
 def correlations(ctx, fit, alpha: float) -> str:
+    """Residual autocorrelation and input cross-correlation with their (1 − α) bounds, and the
+    Billings–Voon higher-order correlations with ±1.96/√N."""
     prob = ctx.prob
     e = fit.resid_est[:, 0]
+    u = prob.U[prob.split.est_slice(), 0] if ctx.model.inputs else None
     r, bound = rstats.autocorr(e, 25, 1 - alpha)
-    fig, axes = plt.subplots(1, 2 if ctx.model.inputs else 1, figsize=(9, 2.6), squeeze=False)
+    fig, axes = _fig(1, 3 if u is not None else 2, figsize=(WIDTH_IN, 2.7), squeeze=False)
     ax = axes[0, 0]
     ax.stem(np.arange(1, 26), r[1:], basefmt=" ")
     ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15)
-    ax.set_title(f"residual autocorrelation, ±{bound:.3g} ({100 * (1 - alpha):.0f} %)", fontsize=9)
+    ax.set_title(f"autocorrelation, bound ±{bound:.3g} ({100 * (1 - alpha):.0f} %)")
     ax.set_xlabel("lag [samples]")
-    if ctx.model.inputs:
-        u = prob.U[prob.split.est_slice(), 0]
+    k = 1
+    if u is not None:
         lags, c, b = rstats.crosscorr(e, u, 25, 1 - alpha)
         ax = axes[0, 1]
         ax.stem(lags, c, basefmt=" ")
         ax.axhspan(-b, b, color="tab:blue", alpha=0.15)
-        ax.set_title(f"input–residual cross-correlation, ±{b:.3g}", fontsize=9)
+        ax.set_title(f"input–residual cross-corr., ±{b:.3g}")
         ax.set_xlabel("lag [samples]")
+        k = 2
+    ho = analysis.billings_voon(e, u, 20)
+    ax = axes[0, k]
+    for (name, cur), col in zip(ho.curves.items(), COLORS):
+        ax.plot(ho.lags, cur, ".-", lw=0.8, ms=3, color=col, label=name)
+    ax.axhspan(-ho.bound, ho.bound, color="tab:blue", alpha=0.15)
+    ax.set_title(f"higher-order (Billings–Voon), ±{ho.bound:.3g}")
+    ax.set_xlabel("lag τ [samples]")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=3, frameon=False, fontsize=8.5)
+    fig.tight_layout()
     return _png(fig)
 
 
-def ellipses(fit, max_pairs: int = 6) -> str | None:
-    """95 % confidence ellipses (θ−θ̂)ᵀP⁻¹(θ−θ̂) ≤ χ²₂(0.95) = 5.991 for pairs of estimated quantities."""
-    n = len(fit.theta)
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)][:max_pairs]
-    if not pairs or not np.all(np.isfinite(fit.cov)):
+def error_model_plot(items: list[tuple[str, "analysis.ErrorModel"]], in_name: str, out_name: str,
+                     units: dict[str, str]) -> str | None:
+    """|G(f)| of the model-error model (FIR from input to residual) with its 99 % band."""
+    items = [(lab, em) for lab, em in items if em is not None]
+    if not items:
         return None
-    fig, axes = plt.subplots(1, len(pairs), figsize=(3.0 * len(pairs), 2.8), squeeze=False)
+    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.8))
+    for (lab, em), col in zip(items, COLORS):
+        ax.plot(em.f_hz, em.mag, color=col, lw=1.0, label=f"{lab}: |G|")
+        ax.fill_between(em.f_hz, np.clip(em.mag - em.band, 0, None), em.mag + em.band, color=col, alpha=0.2, lw=0,
+                        label=f"{lab}: 99 % band")
+    ax.set_xlabel("frequency [Hz]")
+    uu, yu = units.get(in_name), units.get(out_name)
+    ax.set_ylabel(f"|G| [{yu}/{uu}]" if uu and yu else f"|G| [{out_name} per {in_name}]")
+    ax.set_xlim(0, items[0][1].f_hz[-1])
+    _legend_above(ax, ncol=4)
+    return _png(fig)
+
+
+def corner(fit, level_chi2: float = CHI2_2_95, posterior=None, title_level: str = "95 %") -> str | None:
+    """Confidence ellipses (θ−θ̂)ᵀP⁻¹(θ−θ̂) ≤ χ²₂(0.95) = 5.991 for **every** pair of estimated
+    quantities, as a lower-triangular corner plot; with ``posterior`` its draws are overlaid."""
+    n = len(fit.theta)
+    if n < 2 or not np.all(np.isfinite(fit.cov)):
+        return None
+    m = n - 1
+    cell = min(2.4, WIDTH_IN / m)
+    fig, axes = _fig(m, m, figsize=(cell * m + 0.6, cell * m + 0.3), squeeze=False)
     ang = np.linspace(0, 2 * np.pi, 200)
-    for ax, (i, j) in zip(axes[0], pairs):
-        P = fit.cov[np.ix_([i, j], [i, j])]
-        w, V = np.linalg.eigh(P)
-        pts = V @ (np.sqrt(np.clip(w, 0, None) * CHI2_2_95)[:, None] * np.vstack([np.cos(ang), np.sin(ang)]))
-        ax.plot(fit.theta[i] + pts[0], fit.theta[j] + pts[1], color="tab:blue")
-        ax.plot(fit.theta[i], fit.theta[j], "k+")
-        ax.set_xlabel(fit.names[i], fontsize=8)
-        ax.set_ylabel(fit.names[j], fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.ticklabel_format(style="sci", scilimits=(-3, 4))
-    fig.suptitle("95 % confidence ellipses (χ²₂ = 5.991)", fontsize=9)
-    fig.tight_layout()
+    for r in range(m):
+        for c in range(m):
+            ax = axes[r, c]
+            i, j = c, r + 1   # x: parameter c, y: parameter r+1
+            if c > r:
+                ax.set_visible(False)
+                continue
+            if posterior is not None:
+                s = posterior.samples
+                step = max(1, len(s) // 1500)
+                ax.plot(s[::step, i], s[::step, j], ".", ms=1.5, color="tab:orange", alpha=0.35,
+                        label="emcee posterior draws", rasterized=True)
+            P = fit.cov[np.ix_([i, j], [i, j])]
+            w, V = np.linalg.eigh(P)
+            pts = V @ (np.sqrt(np.clip(w, 0, None) * level_chi2)[:, None] * np.vstack([np.cos(ang), np.sin(ang)]))
+            ax.plot(fit.theta[i] + pts[0], fit.theta[j] + pts[1], color="tab:blue", lw=1.1,
+                    label=f"Gauss {title_level} ellipse")
+            ax.plot(fit.theta[i], fit.theta[j], "k+", ms=7)
+            ax.ticklabel_format(style="sci", scilimits=(-3, 4))
+            ax.locator_params(nbins=4)
+            if r == m - 1:
+                ax.set_xlabel(fit.names[i])
+            else:
+                ax.tick_params(labelbottom=False)
+            if c == 0:
+                ax.set_ylabel(fit.names[j])
+            else:
+                ax.tick_params(labelleft=False)
+    h, lab = axes[0, 0].get_legend_handles_labels()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / (cell * m + 0.3)))
+    fig.legend(h, lab, loc="upper left", frameon=False, fontsize=8.5, markerscale=5, ncol=2,
+               bbox_to_anchor=(0.0, 1.0))
+    return _png(fig)
+
+
+def band(ctx, fit, lohi: np.ndarray, units: dict[str, str], zoom: int = 400, what: str = "") -> str:
+    """Measured vs the final model with its 95 % response band (parameter uncertainty) on the
+    validation zoom window."""
+    prob = ctx.prob
+    sl = prob.split.val_slice()
+    t = prob.t[sl]
+    y = prob.Y[sl, 0]
+    a, b = analysis.zoom_window(y - fit.Yhat[sl, 0], zoom)
+    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.7))
+    ax.fill_between(t[a:b], lohi[0][sl, 0][a:b], lohi[1][sl, 0][a:b], color="tab:green", alpha=0.3, lw=0,
+                    label=f"95 % response band ({what})")
+    ax.plot(t[a:b], y[a:b], "k", lw=1.2, label="measured")
+    ax.plot(t[a:b], fit.Yhat[sl, 0][a:b], color="tab:green", lw=0.9, label="final model")
+    ax.set_xlabel("time [s] (validation part)")
+    ax.set_ylabel(label(prob.out_names[0], units))
+    _legend_above(ax)
     return _png(fig)
 
 
 def err_chart(frols: dict) -> str:
     """ERR of each selected term (FROLS), in selection order, with the cumulative sum."""
     names, err = frols["names"], np.asarray(frols["err"], float)
-    fig, ax = plt.subplots(1, 1, figsize=(7, 2.6))
+    fig, ax = _fig(1, 1, figsize=(7.5, 2.8))
     x = np.arange(len(names))
-    ax.bar(x, 100 * err, color="tab:blue")
+    ax.bar(x, 100 * err, color="tab:blue", label="ERR of the term")
     ax.plot(x, 100 * np.cumsum(err), "k.-", lw=0.8, label="cumulative")
-    ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    ax.set_xticks(x, names, rotation=30, ha="right")
     ax.set_ylabel("ERR [%]")
     ax.set_yscale("log")
-    ax.legend(fontsize=7)
-    ax.set_title(f"ERR of the selected terms ({frols['n_candidates']} candidates, stop: {frols['criterion']})",
-                 fontsize=9)
+    _legend_above(ax)
     return _png(fig)
 
 
-def ts_memberships(ts: dict) -> str:
+def ts_memberships(ts: dict, units: dict[str, str]) -> str:
     """Normalised Takagi–Sugeno memberships over the first premise input."""
     grid = np.asarray(ts["grid"])
     c = np.asarray(ts["centres"])[:, 0]
     s = np.asarray(ts["sigmas"])[:, 0]
     beta = np.exp(-((grid[:, None] - c[None, :]) / s[None, :]) ** 2)
     w = beta / beta.sum(axis=1, keepdims=True)
-    fig, ax = plt.subplots(1, 1, figsize=(7, 2.4))
+    fig, ax = _fig(1, 1, figsize=(7.5, 2.6))
     ax.plot(grid, w, lw=1)
-    ax.set_xlabel(ts["inputs"][0])
-    ax.set_ylabel("normalised membership")
-    ax.set_title(f"Takagi–Sugeno: {ts['rules']} rules chosen by blocked CV from {ts['candidates']}", fontsize=9)
+    ax.set_xlabel(label(ts["inputs"][0], units))
+    ax.set_ylabel("normalised membership [–]")
     return _png(fig)
 
 
 def rls_trajectories(res) -> str:
     """RLS parameter trajectories θ̂_k of one structure (a drifting or jumping parameter shows here)."""
     th = res.extra["theta_trajectory"]
-    fig, ax = plt.subplots(1, 1, figsize=(8, 2.6))
+    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.8))
     for j, name in enumerate(res.terms):
         ax.plot(res.extra["t"], th[:, j], lw=0.8, label=name)
     ax.set_xlabel("time [s] (estimation data)")
-    ax.set_ylabel("θ̂")
+    ax.set_ylabel("θ̂ (coefficient of the term)")
     lim = np.percentile(np.abs(th[len(th) // 10:]), 99.5) * 1.5 if len(th) > 10 else None
     if lim and np.isfinite(lim) and lim > 0:
         ax.set_ylim(-lim, lim)
-    ax.legend(fontsize=7, ncol=min(4, len(res.terms)))
-    ax.set_title(f"RLS parameter trajectories, structure {res.name}", fontsize=9)
+    _legend_above(ax, ncol=min(6, len(res.terms)))
     return _png(fig)

@@ -1,0 +1,227 @@
+"""Numbers the report draws that the diagnosis does not keep: display decimation, higher-order
+residual correlations, the model-error model, the response band and the emcee posterior of the final
+grey-box model. All seeded from the config's seed; nothing here changes ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from .. import progress
+
+
+# ------------------------------------------------------------------ display decimation
+
+def envelope(t: np.ndarray, y: np.ndarray, max_points: int = 4000, bins: int = 600):
+    """Min/max envelope for drawing a long trace: ``None`` when ``len(y) <= max_points`` (draw it
+    as is), else ``(t_bin, lo, hi)`` over ``bins`` bins of consecutive samples, so every sample's value
+    lies inside the drawn band (no aliasing, unlike taking every k-th sample). ``bins`` ≈ the axes'
+    width in pixels: narrower bins would be thinner than a pixel and vanish under antialiasing."""
+    n = len(y)
+    if n <= max_points:
+        return None
+    nb = max(1, min(bins, n))
+    edges = np.linspace(0, n, nb + 1).astype(int)
+    lo = np.minimum.reduceat(y, edges[:-1])
+    hi = np.maximum.reduceat(y, edges[:-1])
+    tb = 0.5 * (t[edges[:-1]] + t[np.maximum(edges[1:] - 1, edges[:-1])])
+    return tb, lo, hi
+
+
+def zoom_window(err: np.ndarray, width: int) -> tuple[int, int]:
+    """[a, b) of ``width`` samples centred on the largest |error| (where the model is worst)."""
+    n = len(err)
+    width = min(width, n)
+    k = int(np.nanargmax(np.abs(err))) if n and np.any(np.isfinite(err)) else 0
+    a = max(0, min(n - width, k - width // 2))
+    return a, a + width
+
+
+# ------------------------------------------------------------------ higher-order correlation tests
+
+def _ncorr(a: np.ndarray, b: np.ndarray, nlags: int) -> np.ndarray:
+    """φ_ab(τ) = Σ_k a_k b_{k+τ} / √(Σa² Σb²), τ = 0..nlags (a, b mean-removed)."""
+    a = a - a.mean()
+    b = b - b.mean()
+    den = math.sqrt(float(a @ a) * float(b @ b)) or 1.0
+    n = len(a)
+    return np.array([float(a[:n - k] @ b[k:]) / den for k in range(nlags + 1)])
+
+
+@dataclass
+class HigherOrder:
+    lags: np.ndarray
+    curves: dict[str, np.ndarray]
+    bound: float
+
+
+def billings_voon(e: np.ndarray, u: np.ndarray | None, nlags: int = 20) -> HigherOrder:
+    """Billings & Voon (1986) nonlinear correlation tests of a residual e against input u:
+    φ_{u²'e}(τ), φ_{u²'e²}(τ) (u²' = u² − mean) and φ_{e(eu)}(τ) = corr(e_k, e_{k−1−τ} u_{k−1−τ});
+    each ≈ 0 for an adequate model, bounds ±1.96/√N (95 %)."""
+    n = len(e)
+    curves: dict[str, np.ndarray] = {}
+    if u is not None and np.ptp(u) > 0:
+        u2 = u ** 2
+        curves["φ u²′e"] = _ncorr(u2, e, nlags)
+        curves["φ u²′e²"] = _ncorr(u2, e ** 2, nlags)
+        eu = e * u
+        curves["φ e(eu)"] = np.concatenate([[np.nan], _ncorr(eu[:-1], e[1:], nlags - 1)])  # τ ≥ 1 ↔ lag 1+τ
+    else:
+        curves["φ e²′e²"] = _ncorr(e ** 2, e ** 2, nlags)
+        curves["φ e²′e²"][0] = np.nan
+    return HigherOrder(np.arange(nlags + 1), curves, 1.96 / math.sqrt(n))
+
+
+# ------------------------------------------------------------------ model-error model
+
+@dataclass
+class ErrorModel:
+    f_hz: np.ndarray
+    mag: np.ndarray
+    band: np.ndarray     # 99 % half-width of |G| (delta method)
+    order: int
+
+
+def error_model(e: np.ndarray, u: np.ndarray, dt: float, order: int = 30, n_freq: int = 256) -> ErrorModel | None:
+    """Model-error model (Ljung 1999, *System Identification*, §16.6 "model error models"): an FIR
+    model e_k = Σ_{j=0}^{n−1} b_j u_{k−j} + v_k of the residual on the input, fitted by least squares;
+    its frequency response G(f) = Σ b_j e^{−i2πf j Δt} with a 99 % band (cov(b̂) = σ̂²(ΦᵀΦ)⁻¹, delta
+    method for |G|). A band that contains 0 at every frequency says the residual holds no more input
+    dynamics."""
+    n = len(e)
+    if n <= 4 * order or np.ptp(u) == 0:
+        return None
+    Phi = np.column_stack([u[order - 1 - j:n - j] for j in range(order)])
+    y = e[order - 1:]
+    b, *_ = np.linalg.lstsq(Phi, y, rcond=None)
+    r = y - Phi @ b
+    s2 = float(r @ r) / max(len(y) - order, 1)
+    C = s2 * np.linalg.pinv(Phi.T @ Phi)
+    # only where the input has power: above it the FIR response is not identifiable (ill-conditioned)
+    U = np.abs(np.fft.rfft(u - u.mean())) ** 2
+    cum = np.cumsum(U) / max(float(U.sum()), 1e-300)
+    f_max = max(float(np.fft.rfftfreq(n, dt)[min(int(np.searchsorted(cum, 0.999)), len(cum) - 1)]), 2.0 / (n * dt))
+    f = np.linspace(0, min(f_max, 0.5 / dt), n_freq)
+    E = np.exp(-2j * np.pi * f[:, None] * dt * np.arange(order)[None, :])
+    G = E @ b
+    mag = np.abs(G)
+    re, im = E.real, E.imag  # Re G = re·b, Im G = im·b
+    var_re = np.einsum("fi,ij,fj->f", re, C, re)
+    var_im = np.einsum("fi,ij,fj->f", im, C, im)
+    cov_ri = np.einsum("fi,ij,fj->f", re, C, im)
+    safe = np.where(mag > 0, mag, 1.0)
+    var_mag = (G.real ** 2 * var_re + G.imag ** 2 * var_im + 2 * G.real * G.imag * cov_ri) / safe ** 2
+    z = float(stats.norm.ppf(0.995))
+    return ErrorModel(f, mag, z * np.sqrt(np.clip(var_mag, 0, None)), order)
+
+
+# ------------------------------------------------------------------ parameters → simulation
+
+def unpack(fit, theta: np.ndarray):
+    """(model, x0) of a fit's estimated vector (free params, then "x0.<state>"), as in fit.py."""
+    nfree = sum(1 for n in fit.names if not n.startswith("x0."))
+    m = fit.model.with_params(dict(zip(fit.names[:nfree], theta[:nfree])))
+    x0 = np.array(fit.x0, dtype=float).copy()
+    for n, v in zip(fit.names[nfree:], theta[nfree:]):
+        x0[list(fit.model.states).index(n[3:])] = v
+    return m, x0
+
+
+def response_band(fit, prob, samples: np.ndarray, level: float = 0.95) -> np.ndarray | None:
+    """Pointwise ``level`` band (2, N, ny) of the free-run output over parameter draws ``samples``
+    (Gauss N(θ̂, P) or posterior draws); draws that diverge are left out."""
+    from ..errors import SimulationError
+    from ..fit import simulate_full
+    sims = []
+    for th in progress.bar(samples, len(samples), "response band"):
+        m, x0 = unpack(fit, th)
+        try:
+            sims.append(simulate_full(m, prob, x0))
+        except SimulationError:
+            continue
+    if len(sims) < 5:
+        return None
+    arr = np.stack(sims)
+    q = 100 * (1 - level) / 2
+    return np.percentile(arr, [q, 100 - q], axis=0)
+
+
+def gauss_draws(fit, n: int, seed: int) -> np.ndarray | None:
+    if not len(fit.theta) or not np.all(np.isfinite(fit.cov)):
+        return None
+    rng = np.random.default_rng([seed, 10])
+    return rng.multivariate_normal(fit.theta, fit.cov, size=n, method="eigh")
+
+
+# ------------------------------------------------------------------ emcee posterior of the final model
+
+@dataclass
+class Posterior:
+    samples: np.ndarray        # (n, p) after burn-in and thinning
+    names: list[str]
+    tau: np.ndarray
+    acceptance: float
+    walkers: int
+    steps: int
+    burn: int
+    thin: int
+    warnings: list[str]
+
+
+def mcmc_posterior(fit, prob, seed: int, walkers: int | None = None, steps: int = 800) -> Posterior | None:
+    """emcee posterior of the final grey-box model's estimated quantities under the output-error
+    likelihood with σ² fixed at its estimate: log p(θ | y) = −SSE_w(θ)/(2σ̂²) + const, flat prior on
+    a box of ±50 Laplace standard deviations (the model is nonlinear in θ, so the posterior need not be
+    the Gauss ellipse). Walkers start on N(θ̂, (0.1 P)) from ``default_rng(seed)``; the sampler's
+    RandomState is seeded too. Burn-in 2·max τ, thinning ⌊min τ/2⌋ (emcee's guidance)."""
+    import emcee
+
+    from ..fit import simulate_until
+    p = len(fit.theta)
+    if p == 0 or not np.all(np.isfinite(fit.cov)):
+        return None
+    walkers = walkers or max(2 * p + 2, 12)
+    est = prob.split.est
+    stop = est[1]
+    w = prob.weights
+    yobs = prob.Y[est[0]:stop]
+    dof = max(yobs.size - p, 1)
+    s2 = fit.sse_w / dof
+    sd = np.sqrt(np.clip(np.diag(fit.cov), 1e-300, None))
+    lo, hi = fit.theta - 50 * sd, fit.theta + 50 * sd
+
+    def log_prob(th):
+        if np.any(th < lo) or np.any(th > hi):
+            return -np.inf
+        m, x0 = unpack(fit, th)
+        Yh = simulate_until(m, prob, x0, stop)
+        if Yh is None:
+            return -np.inf
+        r = ((yobs - Yh[est[0]:stop]) * w).ravel()
+        if not np.all(np.isfinite(r)):
+            return -np.inf
+        return -0.5 * float(r @ r) / s2
+
+    rng = np.random.default_rng([seed, 11])
+    L = np.linalg.cholesky(fit.cov + 1e-30 * np.eye(p)) if np.all(np.linalg.eigvalsh(fit.cov) > 0) else np.diag(sd)
+    p0 = fit.theta + 0.1 * rng.standard_normal((walkers, p)) @ L.T
+    sampler = emcee.EnsembleSampler(walkers, p, log_prob)
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    for _ in progress.bar(sampler.sample(p0, iterations=steps), steps, "MCMC steps"):
+        pass
+    tau = np.asarray(sampler.get_autocorr_time(tol=0), float)
+    tmax = float(np.nanmax(tau)) if np.all(np.isfinite(tau)) else float(steps)
+    burn = min(int(math.ceil(2 * tmax)), steps // 2)
+    thin = max(1, int(0.5 * float(np.nanmin(tau)))) if np.all(np.isfinite(tau)) else 1
+    warns = []
+    if steps < 50 * tmax:
+        warns.append(f"{steps} steps < 50 × the integrated autocorrelation time ({tmax:.0f} steps): the "
+                     "chain may not have converged; treat the posterior as indicative")
+    samples = sampler.get_chain(discard=burn, thin=thin, flat=True)
+    return Posterior(samples, list(fit.names), tau, float(np.mean(sampler.acceptance_fraction)), walkers, steps,
+                     burn, thin, warns)

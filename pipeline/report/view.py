@@ -1,0 +1,165 @@
+"""What the report says in words, computed from ``summary.json`` content (so it also works on the
+keys the diagnosis contract adds later, and tolerates their absence on old runs):
+
+* the first screen: how much of the validation output the simulation misses, the main cause, its gain
+  with interval, and a plain warning when a model is unusable (negative fit) or the verdict is
+  "unexplained";
+* one recommendation reconciling the diagnosis loop's model with the structure stage's CV winner;
+* nominal and final residual tests as separate tables.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+_LONG_FLOAT = re.compile(r"(?<![\w.])-?\d+\.\d{5,}(?:[eE][-+]?\d+)?")
+
+
+def sig(x: Any, digits: int = 4) -> str:
+    """A number to ``digits`` significant digits (``–`` for None/NaN); text unchanged."""
+    if x is None:
+        return "–"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        if not math.isfinite(x):
+            return "–"
+        s = f"{x:.{digits}g}"
+        return s.replace("e-0", "e-").replace("e+0", "e").replace("e+", "e")
+    return str(x)
+
+
+def numbers_in_text(s: Any, digits: int = 4) -> str:
+    """Long floats inside a sentence (``0.003704119612513139``) to ``digits`` significant digits."""
+    if s is None:
+        return ""
+    return _LONG_FLOAT.sub(lambda m: sig(float(m.group()), digits), str(s))
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    return f"{n} {word if n == 1 else (many or word + 's')}"
+
+
+def split_tests(diag: dict) -> tuple[list[dict], list[dict]]:
+    """(nominal rows, final rows). New runs: ``tests`` / ``final_tests``; old runs mixed both in
+    ``tests`` and told them apart by ``on``."""
+    tests = list(diag.get("tests") or [])
+    if "final_tests" in diag:
+        return tests, list(diag.get("final_tests") or [])
+    nominal = [t for t in tests if "nominal" in str(t.get("on", "nominal"))]
+    final = [t for t in tests if "nominal" not in str(t.get("on", "nominal"))]
+    return nominal, final
+
+
+def _cv_winner(s: dict) -> dict | None:
+    name = s.get("selected_structure")
+    if not name:
+        return None
+    rows = [m for m in s.get("models") or [] if m.get("name") == name and m.get("cv_mean") is not None]
+    return min(rows, key=lambda m: m["cv_mean"]) if rows else None
+
+
+def recommendation(s: dict) -> dict:
+    """Which model to use and why. The diagnosis loop's final grey-box model and the structure stage's
+    CV winner are different kinds of model; both are free-run simulations on the same validation part,
+    which neither was fitted on, so that RMSE decides. Within 10 % the grey-box model is preferred (its
+    parameters are physical)."""
+    final = s.get("final") or {}
+    diag_name = s.get("selected_model") or "final"
+    d_rmse = (final.get("validation") or {}).get("rmse_sim")
+    d_fit = (final.get("validation") or {}).get("fit_percent")
+    w = _cv_winner(s)
+    out = {"model": diag_name, "kind": "diagnosis", "rmse": d_rmse, "fit": d_fit, "text": "", "cv": w}
+    if w is None or w.get("validation_rmse_sim") is None or d_rmse is None:
+        out["text"] = (f"Use the diagnosis loop's model {diag_name}: validation free-run RMSE {sig(d_rmse)}, "
+                       f"fit {sig(d_fit, 3)} %.")
+        return out
+    c_rmse = w["validation_rmse_sim"]
+    cname = f"{w['name']} ({w.get('estimator')})"
+    ratio = max(d_rmse, c_rmse) / max(min(d_rmse, c_rmse), 1e-300)
+    if c_rmse < d_rmse / 1.1:
+        out.update(model=cname, kind="structure", rmse=c_rmse, fit=None)
+        why = (f"the structure stage's CV winner {cname} simulates the validation data {sig(ratio, 3)}× better "
+               f"(RMSE {sig(c_rmse)} vs {sig(d_rmse)} for the diagnosis loop's {diag_name})")
+    else:
+        better = "better" if d_rmse <= c_rmse else "about as well"
+        why = (f"the diagnosis loop's {diag_name} simulates the validation data {better} (RMSE {sig(d_rmse)} vs "
+               f"{sig(c_rmse)} for the structure stage's CV winner {cname}"
+               + (f", {sig(ratio, 3)}× lower" if d_rmse < c_rmse / 1.1 else "") + ") and keeps physical parameters")
+    out["text"] = (f"Use {out['model']}: {why}. The CV winner was chosen on estimation folds only "
+                   f"(CV free-run RMSE {sig(w.get('cv_mean'))}); the validation part decides between the two.")
+    return out
+
+
+def first_screen(s: dict) -> dict:
+    """Sentences of the first screen, and warnings."""
+    nom = (s.get("nominal") or {}).get("validation") or {}
+    fin = (s.get("final") or {}).get("validation") or {}
+    diag = s.get("diagnosis") or {}
+    verdict = diag.get("verdict", "")
+    findings = diag.get("findings") or []
+    data = s.get("data") or {}
+    val = data.get("validation") or [0, 0]
+    n_val = (val[1] - val[0]) if len(val) == 2 and None not in val else None
+    horizon = (f"{n_val} samples = {sig(n_val * data['sample_time'], 3)} s" if n_val and data.get("sample_time")
+               else "the validation part")
+    nf = nom.get("fit_percent")
+    lines = []
+    if nf is not None:
+        miss = 100 - nf
+        lines.append(f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
+                     f"model misses {sig(miss, 3)} % of the output's variation (fit {sig(nf, 3)} %, "
+                     f"RMSE {sig(nom.get('rmse_sim'))}).")
+    if findings:
+        f0 = findings[0]
+        g = f0.get("gain") or {}
+        ci = g.get("ci95") or [None, None]
+        where = f0.get("equation") or f0.get("output") or ""
+        term = f0.get("term")
+        cause = f"{f0.get('family')}" + (f" in the equation of {where}" if f0.get("equation") else
+                                         (f" on output {where}" if where else "")) + (f" ({term})" if term else "")
+        lines.append(f"Main cause: {cause}. Adding it lowers the validation RMSE by "
+                     f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
+                     f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
+                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} %).")
+        if len(findings) > 1:
+            lines.append(f"{plural(len(findings), 'cause')} found in all: "
+                         + ", ".join(str(f.get("family")) for f in findings)
+                         + f"; with all of them the fit is {sig(fin.get('fit_percent'), 3)} % "
+                           f"(RMSE {sig(fin.get('rmse_sim'))}).")
+        else:
+            lines.append(f"With it the fit is {sig(fin.get('fit_percent'), 3)} % (RMSE {sig(fin.get('rmse_sim'))}).")
+    elif verdict == "no_significant_discrepancy":
+        lines.append("No effect family explains the residual: the nominal model is adequate at the tested "
+                     f"level α = {diag.get('alpha')}.")
+    warnings = []
+    ff = fin.get("fit_percent")
+    if ff is not None and ff < 0:
+        warnings.append(f"The final model is unusable on validation data: fit {sig(ff, 3)} % is worse than "
+                        "predicting the mean of the output. Do not use it for simulation; the improvement from "
+                        f"{sig(nf, 3)} % is not a fix.")
+    elif nf is not None and nf < 0:
+        warnings.append(f"The nominal model is unusable on validation data (fit {sig(nf, 3)} %, worse than the "
+                        "output's mean); only the extended model should be used.")
+    if verdict == "unexplained_discrepancy":
+        warnings.append("Verdict: unexplained discrepancy. The residual tests still fail and no effect family's "
+                        "extension explains what remains" + (" (the findings listed are partial)." if findings
+                                                             else "."))
+    return {"lines": lines, "warnings": warnings, "verdict": verdict, "horizon": horizon}
+
+
+def model_rows(s: dict) -> list[dict]:
+    """The structure comparison rows, CV winner first order: by CV mean (None last)."""
+    rows = [dict(m) for m in s.get("models") or [] if "cv_rmse_one_step" in m]
+    for m in rows:
+        os_ = m.get("cv_rmse_one_step") or []
+        m["_cv_one_step"] = sum(os_) / len(os_) if os_ else None
+        th, sd = m.get("theta") or [], m.get("theta_std") or []
+        m["_params"] = [(t, th[i] if i < len(th) else None, sd[i] if i < len(sd) else None)
+                        for i, t in enumerate(m.get("terms") or [])]
+    rows.sort(key=lambda m: (m.get("cv_mean") is None, m.get("cv_mean") or 0.0))
+    return rows

@@ -1,0 +1,144 @@
+"""MLflow backend (optional extra ``[mlflow]``: ``mlflow-skinny``, ``sqlalchemy``, ``alembic``).
+
+One run folder becomes one MLflow run: params = the resolved config flattened to dotted keys
+(``model.params.k``), metrics = the DVC metrics tree of :mod:`pipeline.tracking.dvc` flattened the same
+way, tags = verdict, main cause, run id, data sha256, git commit, and the run folder logged as
+artifacts. The default store is ``sqlite:///reports/mlruns.db`` (artifacts beside it in
+``reports/mlartifacts``); any tracking URI works. Logging the same folder twice (same run id and same
+``manifest.created``) is a no-op that returns the existing MLflow run id.
+
+Open the UI with ``mlflow ui --backend-store-uri sqlite:///reports/mlruns.db``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import InputError
+from . import DEFAULT_TRACKING_URI
+from .dvc import dvc_metrics, flatten
+
+EXPERIMENT = "sysid"
+_BAD_KEY = re.compile(r"[^\w\-. /:]")
+_PARAM_MAX = 6000            # MLflow's limit on a param value (characters)
+
+
+def _key(k: str) -> str:
+    """MLflow keys allow alphanumerics, ``_ - . / :`` and spaces; anything else (``+`` in
+    ``nominal+cubic_stiffness``) becomes ``_``."""
+    return _BAD_KEY.sub("_", k)[:250]
+
+
+def _import_mlflow():
+    try:
+        import mlflow  # noqa: F401
+        from mlflow.tracking import MlflowClient
+    except ImportError:
+        raise InputError("MLflow tracking needs the optional extra: pip install -e '.[mlflow]'",
+                         key="--track") from None
+    for name in ("alembic", "mlflow.store.db.utils", "mlflow.store.db"):
+        logging.getLogger(name).setLevel(logging.WARNING)
+    return MlflowClient
+
+
+def resolve_uri(uri: str | None) -> str:
+    """``None``/``"default"`` → the default sqlite store; a sqlite file's folder is created."""
+    uri = DEFAULT_TRACKING_URI if uri in (None, "", "default") else uri
+    if uri.startswith("sqlite:///"):
+        Path(uri[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+    return uri
+
+
+def _artifact_location(uri: str) -> str | None:
+    if uri.startswith("sqlite:///"):
+        return (Path(uri[len("sqlite:///"):]).resolve().parent / "mlartifacts").as_uri()
+    return None
+
+
+def params_of(config: dict) -> dict[str, str]:
+    out = {}
+    for k, v in flatten(config).items():
+        s = v if isinstance(v, str) else json.dumps(v)
+        out[_key(k)] = s if len(s) <= _PARAM_MAX else s[:_PARAM_MAX - 1] + "…"
+    return out
+
+
+def metrics_of(summary: dict) -> dict[str, float]:
+    return {_key(k): float(v) for k, v in flatten(dvc_metrics(summary)).items()}
+
+
+def tags_of(summary: dict, manifest: dict) -> dict[str, str]:
+    diag = summary.get("diagnosis") or {}
+    f = diag.get("findings") or []
+    git = manifest.get("git") or {}
+    tags = {"verdict": diag.get("verdict"), "main_cause": f[0].get("family") if f else "none",
+            "sysid.run_id": summary.get("run_id"), "sysid.data_sha256": summary.get("data_sha256"),
+            "sysid.config_sha256": summary.get("config_sha256"), "sysid.created": manifest.get("created"),
+            "sysid.selected_model": summary.get("selected_model"),
+            "mlflow.source.git.commit": git.get("commit")}
+    return {k: str(v) for k, v in tags.items() if v is not None}
+
+
+def _chunks(items: list, n: int):
+    for i in range(0, len(items), n):
+        yield items[i:i + n]
+
+
+def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> str:
+    """Log one run folder; returns the MLflow run id."""
+    MlflowClient = _import_mlflow()
+    from mlflow.entities import Metric, Param, RunTag
+    folder = Path(folder)
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+        manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
+        config = yaml.safe_load((folder / "config.resolved.yaml").read_text(encoding="utf-8")) or {}
+    except (OSError, ValueError, yaml.YAMLError) as exc:
+        raise InputError(f"not a complete run folder ({exc})", file=str(folder)) from None
+    uri = resolve_uri(tracking_uri)
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name(experiment)
+    exp_id = exp.experiment_id if exp else client.create_experiment(experiment, artifact_location=_artifact_location(uri))
+    tags = tags_of(summary, manifest)
+    flt = " and ".join(f"tags.`{k}` = '{tags[k]}'" for k in ("sysid.run_id", "sysid.created") if k in tags)
+    if flt:
+        prev = client.search_runs([exp_id], filter_string=flt, max_results=1)
+        if prev:
+            return prev[0].info.run_id
+    run = client.create_run(exp_id, run_name=str(summary.get("run_id") or folder.name))
+    rid = run.info.run_id
+    ts = int(time.time() * 1000)
+    metrics = [Metric(k, v, ts, 0) for k, v in metrics_of(summary).items()]
+    params = [Param(k, v) for k, v in params_of(config).items()]
+    tag_list = [RunTag(k, v) for k, v in tags.items()]
+    for part in _chunks(params, 100):
+        client.log_batch(rid, params=part)
+    for part in _chunks(metrics, 1000):
+        client.log_batch(rid, metrics=part)
+    for part in _chunks(tag_list, 100):
+        client.log_batch(rid, tags=part)
+    client.log_artifacts(rid, str(folder))
+    client.set_terminated(rid)
+    return rid
+
+
+def search(tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> Any:
+    """``mlflow.search_runs`` on the store (a pandas DataFrame)."""
+    _import_mlflow()
+    import mlflow
+    uri = resolve_uri(tracking_uri)
+    old = os.environ.get("MLFLOW_TRACKING_URI")
+    mlflow.set_tracking_uri(uri)
+    try:
+        return mlflow.search_runs(experiment_names=[experiment])
+    finally:
+        if old is not None:
+            mlflow.set_tracking_uri(old)

@@ -1,0 +1,190 @@
+"""Report v2 on the demo: byte-identical, every section, escaping, and the words of the first screen."""
+
+import base64
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from pipeline.cli import main
+from pipeline.report import analysis, view
+
+ROOT = Path(__file__).resolve().parents[2]
+DEMO = ROOT / "configs" / "demo.yaml"
+SECTIONS = ("summary", "data", "simulation", "residuals", "findings", "models", "uncertainty", "provenance")
+
+
+@pytest.fixture(scope="module")
+def demo_reports(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rep")
+    assert main(["report", str(DEMO), "--out", str(d / "a")]) == 0
+    assert main(["report", str(DEMO), "--out", str(d / "b")]) == 0
+    return d / "a" / "report.html", d / "b" / "report.html"
+
+
+def test_two_runs_give_byte_identical_html(demo_reports):
+    a, b = demo_reports
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_every_section_is_present_and_self_contained(demo_reports):
+    html = demo_reports[0].read_text(encoding="utf-8")
+    for sec in SECTIONS:
+        assert f'id="{sec}"' in html, sec
+    for needle in ("Residual tests: nominal model", "Residual tests: final model", "Model-error model",
+                   "Recommended model", "95 % confidence ellipses", "Response uncertainty", "data sha256",
+                   "Resolved configuration", "cubic_stiffness", "ΔBIC", "ljung_box", "Billings–Voon"):
+        assert needle in html, needle
+    imgs = re.findall(r'<img alt="([^"]*)" src="data:image/png;base64,([^"]+)"', html)
+    assert len(imgs) >= 11 and all(len(b64) > 1000 for _, b64 in imgs)
+    # self-contained: no script, no stylesheet link, no external URL in src/href
+    assert "<script" not in html and "<link" not in html
+    assert not re.search(r'(src|href)="(?!data:|#)', html)
+    # floats formatted: no 10+ digit decimals anywhere in the visible text
+    text = re.sub(r'src="data:[^"]+"', "", html)
+    assert not re.search(r"\d\.\d{8,}", text)
+    assert "effect(s)" not in html and "1 effect," in html or "misses 1 effect" in html
+
+
+def test_nominal_and_final_tests_are_separate_tables(demo_reports):
+    html = demo_reports[0].read_text(encoding="utf-8")
+    nominal = html.split("Residual tests: nominal model")[1].split("Residual tests: final model")[0]
+    final = html.split("Residual tests: final model")[1].split("Model-error model")[0]
+    assert nominal.count(">ljung_box<") == 1 and "final model" not in nominal.split("<img")[0]
+    assert final.count(">ljung_box<") == 1
+
+
+def test_user_strings_are_escaped(tmp_path):
+    """Column names, the data file name and config strings reach the report (data section, provenance)
+    escaped, so they cannot inject markup."""
+    import pandas as pd
+    df = pd.read_csv(ROOT / "data" / "demo.csv")
+    evil_u, evil_x = "u<script>alert(1)</script>", "x&<b>bold</b>"
+    df = df.rename(columns={"u": evil_u, "x": evil_x})
+    data = tmp_path / "d<i>emo.csv"
+    df.to_csv(data, index=False)
+    cfg = yaml.safe_load(DEMO.read_text())
+    cfg["data"].update(path=str(data), inputs={evil_u: "u"}, outputs={evil_x: "x"})
+    cfg["diagnose"]["max_findings"] = 0
+    cfg["units"] = {"x": "m<img src=x>"}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg, allow_unicode=True))
+    assert main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
+    html = (tmp_path / "run" / "report.html").read_text(encoding="utf-8")
+    assert "<script" not in html and "<b>bold" not in html and "<i>emo" not in html and "<img src=x" not in html
+    assert "u&lt;script&gt;alert(1)&lt;/script&gt;" in html
+    assert "x&amp;&lt;b&gt;bold&lt;/b&gt;" in html
+    assert "d&lt;i&gt;emo.csv" in html
+
+
+# ------------------------------------------------------------------ the words (hand-made summaries)
+
+def _summary(nom_fit, fin_fit, verdict="discrepancy", findings=True, **extra):
+    s = {"nominal": {"validation": {"fit_percent": nom_fit, "rmse_sim": 0.2}},
+         "final": {"validation": {"fit_percent": fin_fit, "rmse_sim": 0.1}},
+         "data": {"validation": [0, 1000], "sample_time": 0.01},
+         "diagnosis": {"verdict": verdict, "alpha": 0.01,
+                       "findings": [{"family": "cubic_stiffness", "equation": "v", "term": "x**3",
+                                     "gain": {"relative": 0.5, "ci95": [0.4, 0.6]}}] if findings else []},
+         "selected_model": "nominal+cubic_stiffness", "models": []}
+    s.update(extra)
+    return s
+
+
+def test_first_screen_says_how_much_is_missed_the_cause_and_the_gain():
+    fs = view.first_screen(_summary(62.39, 97.6))
+    text = " ".join(fs["lines"])
+    assert "misses 37.6 %" in text and "1000 samples = 10 s" in text
+    assert "cubic_stiffness in the equation of v (x**3)" in text and "50 %" in text and "40 to 60 %" in text
+    assert fs["warnings"] == []
+
+
+def test_negative_fit_and_unexplained_verdict_are_warned_plainly():
+    fs = view.first_screen(_summary(-328.0, -126.0))
+    assert len(fs["warnings"]) == 1 and "unusable" in fs["warnings"][0] and "-126 %" in fs["warnings"][0]
+    fs = view.first_screen(_summary(-328.0, 80.0))
+    assert "nominal model is unusable" in fs["warnings"][0]
+    fs = view.first_screen(_summary(50.0, 60.0, verdict="unexplained_discrepancy"))
+    assert any("unexplained" in w for w in fs["warnings"])
+
+
+def test_recommendation_reconciles_diagnosis_model_and_cv_winner():
+    cv_rows = [{"name": "M3", "estimator": "ls", "cv_mean": 0.01, "validation_rmse_sim": 0.1 / 250,
+                "cv_rmse_one_step": [0.1]},
+               {"name": "M3", "estimator": "iv", "cv_mean": 0.02, "validation_rmse_sim": 0.5, "cv_rmse_one_step": [0.1]}]
+    r = view.recommendation(_summary(10, 20, models=cv_rows, selected_structure="M3"))
+    assert r["model"] == "M3 (ls)" and "250× better" in r["text"]
+    rows = [dict(cv_rows[0], validation_rmse_sim=0.105)]   # within 10 %: keep the physical model
+    r = view.recommendation(_summary(10, 20, models=rows, selected_structure="M3"))
+    assert r["model"] == "nominal+cubic_stiffness" and "physical" in r["text"]
+    r = view.recommendation(_summary(10, 20))
+    assert r["model"] == "nominal+cubic_stiffness"
+
+
+def test_tests_split_for_old_and_new_runs():
+    old = {"tests": [{"name": "ljung_box", "on": "nominal model, estimation data"},
+                     {"name": "ljung_box", "on": "final model, estimation data (noise)"}]}
+    n, f = view.split_tests(old)
+    assert [t["on"] for t in n] == ["nominal model, estimation data"] and len(f) == 1
+    new = {"tests": [{"name": "a"}], "final_tests": [{"name": "b", "on": "final"}]}
+    assert view.split_tests(new) == ([{"name": "a"}], [{"name": "b", "on": "final"}])
+
+
+def test_number_formatting():
+    assert view.sig(0.003704119612513139) == "0.003704"
+    assert view.numbers_in_text("slope 0.003704119612513139 and 12.5") == "slope 0.003704 and 12.5"
+    assert view.sig(None) == "–" and view.sig(float("nan")) == "–" and view.sig(3) == "3"
+    assert view.plural(1, "effect") == "1 effect" and view.plural(2, "effect") == "2 effects"
+
+
+# ------------------------------------------------------------------ numbers behind the figures
+
+def test_envelope_contains_every_sample():
+    rng = np.random.default_rng(0)
+    y = np.cumsum(rng.standard_normal(40_400))
+    t = np.arange(y.size) * 0.01
+    tb, lo, hi = analysis.envelope(t, y)
+    assert len(lo) == 600
+    edges = np.linspace(0, y.size, len(lo) + 1).astype(int)
+    for k in (0, 7, 299, 599):
+        seg = y[edges[k]:edges[k + 1]]
+        assert lo[k] == seg.min() and hi[k] == seg.max()
+    assert analysis.envelope(t[:100], y[:100]) is None
+
+
+def test_error_model_recovers_a_known_fir():
+    """e = b0 u_k + b1 u_{k-1}: |G(f)| = |b0 + b1 e^{-i2πfΔt}| (closed form)."""
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(20_000)
+    b0, b1, dt = 0.5, -0.3, 0.01
+    e = b0 * u + b1 * np.concatenate([[0.0], u[:-1]]) + 0.01 * rng.standard_normal(u.size)
+    em = analysis.error_model(e, u, dt, order=10)
+    exact = np.abs(b0 + b1 * np.exp(-2j * np.pi * em.f_hz * dt))
+    assert np.max(np.abs(em.mag - exact)) < 0.002
+    assert np.all(em.band < 0.002) and np.all(em.band > 0)
+    assert np.all(em.mag - em.band > 0)          # real input dynamics: the band never reaches 0
+    # a residual with no input dynamics: the 99 % band covers 0 at most frequencies (|G| of noise is
+    # Rayleigh-like, so the delta-method band is approximate near 0)
+    em0 = analysis.error_model(rng.standard_normal(u.size), u, dt, order=10)
+    assert np.mean(em0.mag - em0.band <= 0) > 0.75
+
+
+def test_billings_voon_detects_a_squared_input_and_stays_in_bounds_for_white_noise():
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal(5000)
+    white = analysis.billings_voon(rng.standard_normal(5000), u, 20)
+    for name, cur in white.curves.items():
+        assert np.nanmean(np.abs(cur) > white.bound) < 0.15, name
+    hit = analysis.billings_voon(u ** 2 - 1 + 0.1 * rng.standard_normal(5000), u, 20)
+    assert hit.curves["φ u²′e"][0] > 0.9   # e ∝ u²′: correlation ≈ 1 at lag 0
+
+
+def test_figures_are_readable_sizes(demo_reports):
+    """Every figure is drawn at ≤ 9.6 in × 100 dpi + margins (shown about 1:1, so 8.5 pt ticks ≈ 12 px)."""
+    from PIL import Image
+    html = demo_reports[0].read_text(encoding="utf-8")
+    for b64 in re.findall(r'src="data:image/png;base64,([^"]+)"', html):
+        w, h = Image.open(io.BytesIO(base64.b64decode(b64))).size
+        assert 250 <= w <= 1000 and h >= 150

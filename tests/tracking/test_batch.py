@@ -1,0 +1,54 @@
+"""sysid batch: failures are reported, not fatal; the Dask executor gives the same bytes."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pipeline.batch import exit_code, run_batch
+from pipeline.cli import main
+
+
+def test_batch_runs_the_good_configs_and_reports_the_broken_one(batch_runs):
+    res = batch_runs["results"]
+    # results come back in input order, whatever order the workers finished in
+    assert [Path(r.config).stem for r in res] == ["a", "broken", "b", "c"]
+    assert [r.ok for r in res] == [True, False, True, True]
+    bad = res[1]
+    assert bad.kind == "input" and bad.path is None
+    assert "model.free" in bad.error and "nosuch" in bad.error
+    for r in (res[0], res[2], res[3]):
+        s = json.loads((Path(r.path) / "summary.json").read_text())
+        assert s["run_id"] == r.run_id and Path(r.path).name == r.run_id
+    assert exit_code(res) == 2
+    # only complete run folders are left in the root: no temp folder of the failed config
+    assert sorted(p.name for p in batch_runs["root"].iterdir()) == sorted(r.run_id for r in res if r.ok)
+
+
+def test_batch_cli_prints_the_runs_table_and_the_error(batch_runs, capsys, tmp_path):
+    cfgs = batch_runs["configs"]
+    code = main(["batch", str(cfgs["a"]), str(cfgs["broken"]), "--jobs", "1", "--root", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert "demo-" in out and "cubic_stiffness" in out and "1 of 2 configs ran; 1 failed" in out
+    assert err.count("error:") == 1 and "nosuch" in err and "Traceback" not in err
+
+
+def test_bad_batch_options_are_input_errors(capsys):
+    assert main(["batch", "x.yaml", "--jobs", "0"]) == 2
+    assert main(["batch", "x.yaml", "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err
+    assert "--jobs" in err and "--executor dask" in err and "Traceback" not in err
+
+
+def test_dask_local_cluster_gives_byte_identical_summaries(batch_runs, tmp_path):
+    pytest.importorskip("distributed")
+    cfgs = batch_runs["configs"]
+    res = run_batch([str(cfgs["a"]), str(cfgs["broken"]), str(cfgs["c"])], jobs=2, executor="dask",
+                    root=tmp_path)
+    assert [r.ok for r in res] == [True, False, True]
+    assert "nosuch" in res[1].error
+    local = {r.run_id: Path(r.path) for r in batch_runs["results"] if r.ok}
+    for r in (res[0], res[2]):
+        for f in ("summary.json", "metrics.json", "params.yaml"):
+            assert (Path(r.path) / f).read_bytes() == (local[r.run_id] / f).read_bytes(), f
