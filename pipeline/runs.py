@@ -153,11 +153,14 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "nominal": nominal,
         "final": model_block(diag.final, prob),
         "diagnosis": {
-            "verdict": "discrepancy" if diag.findings else "no_significant_discrepancy",
+            "verdict": diag.verdict,
             "findings": diag.findings,
             "tests": _test_rows(diag.tests, "nominal model, estimation data"),
             "final_tests": _test_rows(diag.final_tests, "final model, estimation data")
                            + _test_rows(diag.noise_tests, "final model, estimation data (noise families)"),
+            "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
+            "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
+            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history)},
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
         },
@@ -166,6 +169,17 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "notes": {"rmse_sim": "free-run simulation error (not one-step prediction)",
                   "cv_rmse_sim": "blocked k-fold CV is not computed yet (null)"},
     }
+
+
+def _tried(history: list[dict]) -> list[dict]:
+    """Per family, the last reason it was not (or was) taken, from the diagnosis history."""
+    out: dict[str, str] = {}
+    for it in history:
+        for c in it.get("candidates", []):
+            out[c["family"]] = c.get("reason") or ""
+        for sk in it.get("skipped", []):
+            out.setdefault(sk["family"], sk["reason"])
+    return [{"family": f, "reason": r} for f, r in out.items()]
 
 
 def _test_rows(tests, on: str) -> list[dict]:

@@ -30,14 +30,12 @@ COLUMNS: dict[str, str] = {"name": "name", "run_id": "run id", "data": "data", "
 
 
 def iter_run_folders(root: Path):
-    """Complete run folders directly under ``root``, in name order (see module docstring)."""
-    if not root.is_dir():
+    """Complete run folders under ``root``, in name order: the run-folder module's rule (a complete
+    marker; hidden temp and moved-aside folders never listed)."""
+    from .runfolder import iter_run_folders as _complete
+    if not Path(root).is_dir():
         return
-    for p in sorted(root.iterdir()):
-        if p.name.startswith(".") or not p.is_dir():
-            continue
-        if (p / "manifest.json").is_file() and (p / "summary.json").is_file():
-            yield p
+    yield from _complete(Path(root))
 
 
 @dataclass

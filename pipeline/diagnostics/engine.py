@@ -31,6 +31,7 @@ from ..simulate import simulate_states
 from . import stats
 from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
+from .adequacy import adequacy_tests, where_it_fails
 from .noise import diagnose_noise
 
 
@@ -58,6 +59,10 @@ class Diagnosis:
     fits: list[FitResult]        # nominal, then each accepted extension
     noise_tests: list[stats.TestResult] = field(default_factory=list)
     final_tests: list[stats.TestResult] = field(default_factory=list)   # residual tests of the final model
+    adequacy: list[stats.TestResult] = field(default_factory=list)      # structural adequacy, final model
+    adequacy_nominal: list[stats.TestResult] = field(default_factory=list)
+    verdict: str = "no_significant_discrepancy"
+    where: dict | None = None                                            # where an unexplained misfit is
 
 
 def _log(msg: str) -> None:
@@ -353,11 +358,13 @@ class Diagnoser:
         tests0, f_cyc0 = residual_tests(nominal, prob, self.alpha)
         findings, history, fits = [], [], [nominal]
         switched = "intersample" not in self.families   # the intersample choice is made at most once
+        last_p: dict[str, float] | None = None             # family p-values on the final model
         for it in range(self.max_findings):
             tests, f_cyc = (tests0, f_cyc0) if current is nominal else residual_tests(current, prob, self.alpha)
             fisher = next(t for t in tests if t.name == "fisher_g")
             cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
+            last_p = {c.hyp.family: c.p_family for c in cands}
             _log(f"iteration {it + 1}: {len(cands)} families tested, fired: "
                  f"{[k for k, v in fired.items() if v] or 'none'}")
             rng = np.random.default_rng([self.seed, it])
@@ -402,20 +409,56 @@ class Diagnoser:
                 current = inter[0]
                 fits.append(current)
                 switched = True
+                last_p = None
                 continue
             if best is None:
                 break
             findings.append(self.finding(best, [c for c in acc if c is not best]))
             current = best.fit
             fits.append(current)
+            last_p = None
+        if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
+            tests_f, f_cyc_f = residual_tests(current, prob, self.alpha)
+            cands, _ = self.candidates(current, f_cyc_f / self.dt, next(t for t in tests_f if t.name == "fisher_g"))
+            last_p = {c.hyp.family: c.p_family for c in cands}
+        adequacy = adequacy_tests(current, prob, self.alpha)
+        if last_p:
+            # a family whose added-term test is significant on the final model, yet whose extension was
+            # not accepted: a direction the model misses that no family's extension explains
+            holm = stats.holm(last_p, self.alpha)
+            sig = sorted(k for k, v in holm.items() if v)
+            pmin = min(last_p.values())
+            adequacy.append(stats.TestResult(
+                "structural_wald", float(len(sig)), float(min(1.0, pmin * len(last_p))), None, not sig,
+                ("significant added-term tests, no accepted extension: " + ", ".join(sig)) if sig else
+                "no family's added-term test is significant after Holm correction"))
+        structural_ok = all(t.passed for t in adequacy)
         noise_tests = []
         noise_fams = [f for f in self.families if f in NOISE_FAMILY_IDS]
         if noise_fams and len(findings) < self.max_findings:
-            _log("noise families on the final model: " + ", ".join(noise_fams))
-            nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed, n_boot=self.n_boot)
-            findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
+            if structural_ok:
+                _log("noise families on the final model: " + ", ".join(noise_fams))
+                nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed,
+                                                 n_boot=self.n_boot)
+                findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
+            else:
+                _log("noise families not tested: the final model fails its adequacy tests")
+                noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,
+                                                "not tested: structure inadequate (the final model fails its "
+                                                "input cross-correlation or model-error-model test)")
+                               for f in noise_fams]
         final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
-        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests)
+        if not structural_ok:
+            verdict = "unexplained_discrepancy"
+        elif findings:
+            verdict = "discrepancy"
+        else:
+            verdict = ("no_significant_discrepancy" if all(t.passed for t in final_tests)
+                       else "unexplained_discrepancy")
+        where = where_it_fails(current, prob, adequacy + final_tests) if verdict == "unexplained_discrepancy" else None
+        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
+                         adequacy=adequacy, adequacy_nominal=adequacy_tests(nominal, prob, self.alpha),
+                         verdict=verdict, where=where)
 
     RUNNER_UP_DBIC = 10.0   # accepted alternatives within this ΔBIC of the finding are listed with it
 

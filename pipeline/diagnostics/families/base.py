@@ -151,10 +151,15 @@ def present(model: Model, label: str, target: str) -> bool:
     return any(t.label == label and t.target == target for t in model.terms)
 
 
+_AUTO = object()
+
+
 def additive(family: str, model: Model, eq: str, text: str, *, output: bool = False, name: str | None = None,
-             **desc) -> Hypothesis:
-    """The common hypothesis: ``c * text`` added to equation ``eq`` (or to measured output ``eq``)."""
-    c = pname(model, name or family, eq, text)
+             suffix=_AUTO, **desc) -> Hypothesis:
+    """The common hypothesis: ``c * text`` added to equation ``eq`` (or to measured output ``eq``); the
+    coefficient is named ``<name or family>_<eq>[_<suffix>]`` (suffix: the term text by default)."""
+    suffix = text if suffix is _AUTO else suffix
+    c = pname(model, name or family, eq, *([suffix] if suffix else []))
     term = Term(family, "expr", eq, c, text=text, on="output" if output else "state")
     return Hypothesis(family, f"{family}:{eq}:{text}", [term], [c],
                       equation=None if output else eq, output=eq if output else None, term=text, **desc)

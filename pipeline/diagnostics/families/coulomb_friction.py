@@ -16,7 +16,7 @@ class CoulombFriction(Family):
             z = ctx.state(v)
             if present(ctx.model, f"sign({v})", eq) or min(np.mean(z > 0), np.mean(z < 0)) < 0.02:
                 continue
-            out.append(additive(self.id, ctx.model, eq, f"sign({v})"))
+            out.append(additive(self.id, ctx.model, eq, f"sign({v})", suffix=v))
         return out
 
     def describe(self, hyp, fit, val, sd):

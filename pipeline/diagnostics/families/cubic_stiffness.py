@@ -8,7 +8,7 @@ class CubicStiffness(Family):
     id = "cubic_stiffness"
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
-        return [additive(self.id, ctx.model, eq, f"{x}**3") for eq, x in
+        return [additive(self.id, ctx.model, eq, f"{x}**3", suffix=x) for eq, x in
                 ctx.structure.pairs("positions", ctx.couplings) if not present(ctx.model, f"{x}**3", eq)]
 
     def describe(self, hyp, fit, val, sd):

@@ -7,7 +7,7 @@ class Offset(Family):
     id = "offset"
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
-        return [additive(self.id, ctx.model, eq, "1") for eq in ctx.structure.dynamic_eqs
+        return [additive(self.id, ctx.model, eq, "1", suffix=None) for eq in ctx.structure.dynamic_eqs
                 if not present(ctx.model, "1", eq)]
 
     def describe(self, hyp, fit, val, sd):

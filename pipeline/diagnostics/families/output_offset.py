@@ -7,7 +7,7 @@ class OutputOffset(Family):
     id = "output_offset"
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
-        return [additive(self.id, ctx.model, y, "1", output=True) for y in ctx.out_names
+        return [additive(self.id, ctx.model, y, "1", output=True, suffix=None) for y in ctx.out_names
                 if not any(t.is_output and t.target == y for t in ctx.model.terms)]
 
     def describe(self, hyp, fit, val, sd):

@@ -7,7 +7,7 @@ class QuadraticDamping(Family):
     id = "quadratic_damping"
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
-        return [additive(self.id, ctx.model, eq, f"{v}*abs({v})") for eq, v in
+        return [additive(self.id, ctx.model, eq, f"{v}*abs({v})", suffix=v) for eq, v in
                 ctx.structure.pairs("velocities", ctx.couplings) if not present(ctx.model, f"{v}*abs({v})", eq)]
 
     def describe(self, hyp, fit, val, sd):
