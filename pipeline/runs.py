@@ -184,7 +184,9 @@ def _tried(history: list[dict]) -> list[dict]:
 
 def _test_rows(tests, on: str) -> list[dict]:
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
-             "passed": t.passed, "detail": t.detail, "on": on} for t in tests]
+             "passed": t.passed, "detail": t.detail, "on": on,
+             **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
+            for t in tests]
 
 
 def _git_info() -> dict:

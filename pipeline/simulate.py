@@ -289,7 +289,7 @@ def programs(model: Model) -> Programs:
         tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
         add(2, sidx[term.target], tree, resolver(False, False))
     for s in model.extra_states:
-        add(3, sidx[s], model.equations[s].tree, resolver(False, False))
+        add(3, sidx[s], model.equations[s].tree, resolver(True, False))   # an actuator state sees the raw input
     lim = [(sidx[L.state], pidx[L.lo] if L.lo else -1, pidx[L.hi] if L.hi else -1) for L in model.limits]
     return Programs(np.array(ops, np.int64), np.array(args, np.int64), np.array(consts + [0.0], float),
                     np.array(rows, np.int64).reshape(-1, 4), np.array(lim, np.int64).reshape(-1, 3))

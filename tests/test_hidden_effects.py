@@ -112,5 +112,7 @@ def test_noise_family_end_to_end_with_report(tmp_path, kind, family):
     assert fams[0] == family, fams
     f = s["diagnosis"]["findings"][0]
     assert f["gain"]["metric"] == "validation_nll" and f["gain"]["ci95"][0] > 0
-    assert any(t["on"].endswith("(noise)") for t in s["diagnosis"]["tests"])
+    # the noise tests are on the final model, in its own table; the nominal table holds the nominal only
+    assert any(t["on"].endswith("(noise families)") for t in s["diagnosis"]["final_tests"])
+    assert all(t["on"] == "nominal model, estimation data" for t in s["diagnosis"]["tests"])
     assert family in (tmp_path / "run" / "report.html").read_text()

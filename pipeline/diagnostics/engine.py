@@ -31,7 +31,7 @@ from ..simulate import simulate_states
 from . import stats
 from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
-from .adequacy import adequacy_tests, where_it_fails
+from .adequacy import adequacy_tests, structurally_adequate, where_it_fails
 from .noise import diagnose_noise
 
 
@@ -359,6 +359,7 @@ class Diagnoser:
         findings, history, fits = [], [], [nominal]
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
+        last_r2: dict[str, float] = {}
         for it in range(self.max_findings):
             tests, f_cyc = (tests0, f_cyc0) if current is nominal else residual_tests(current, prob, self.alpha)
             fisher = next(t for t in tests if t.name == "fisher_g")
@@ -421,6 +422,7 @@ class Diagnoser:
             tests_f, f_cyc_f = residual_tests(current, prob, self.alpha)
             cands, _ = self.candidates(current, f_cyc_f / self.dt, next(t for t in tests_f if t.name == "fisher_g"))
             last_p = {c.hyp.family: c.p_family for c in cands}
+            last_r2 = {c.hyp.family: c.wald.r2 for c in cands}
         adequacy = adequacy_tests(current, prob, self.alpha)
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
@@ -428,11 +430,13 @@ class Diagnoser:
             holm = stats.holm(last_p, self.alpha)
             sig = sorted(k for k, v in holm.items() if v)
             pmin = min(last_p.values())
+            r2 = max([last_r2.get(k, 0.0) for k in sig] or [0.0])
             adequacy.append(stats.TestResult(
                 "structural_wald", float(len(sig)), float(min(1.0, pmin * len(last_p))), None, not sig,
-                ("significant added-term tests, no accepted extension: " + ", ".join(sig)) if sig else
-                "no family's added-term test is significant after Holm correction"))
-        structural_ok = all(t.passed for t in adequacy)
+                ("significant added-term tests, no accepted extension: " + ", ".join(
+                    f"{k} ({100 * last_r2.get(k, 0.0):.2g} % of the residual)" for k in sig)) if sig else
+                "no family's added-term test is significant after Holm correction", r2=r2))
+        structural_ok = structurally_adequate(adequacy)
         noise_tests = []
         noise_fams = [f for f in self.families if f in NOISE_FAMILY_IDS]
         if noise_fams and len(findings) < self.max_findings:

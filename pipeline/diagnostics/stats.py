@@ -28,6 +28,7 @@ class TestResult:
     bound: float | None
     passed: bool
     detail: str = ""
+    r2: float | None = None     # effect size where it applies (adequacy): the share of the residual explained
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -218,6 +219,7 @@ class WaldResult:
     statistic: float
     dof: int
     p_value: float
+    r2: float = 0.0      # share of the residual's sum of squares the added columns explain (partial R²)
 
 
 def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray) -> WaldResult:
@@ -238,7 +240,9 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray) -> WaldResult:
     except np.linalg.LinAlgError:
         stat = 0.0
     q = S.shape[1]
-    return WaldResult(beta, V, stat, q, float(stats.chi2.sf(stat, q)))
+    ee = float(e @ e)
+    r2 = float(1.0 - float(eu @ eu) / ee) if ee > 0 else 0.0
+    return WaldResult(beta, V, stat, q, float(stats.chi2.sf(stat, q)), r2)
 
 
 def holm(pvalues: dict[str, float], alpha: float) -> dict[str, bool]:

@@ -11,7 +11,7 @@ from ...model import Term
 from .base import Context, Family, Hypothesis, pname
 
 MIN_CYCLES = 2.0
-LINE_RATIO = 10.0   # input periodogram at f over its median: above it, f is an excited input line
+SPARSE_LINES = 5    # a periodic input: at most this many periodogram bins hold 90 % of its power
 
 
 def amplitude_phase(a: float, b: float) -> tuple[float, float]:
@@ -20,16 +20,21 @@ def amplitude_phase(a: float, b: float) -> tuple[float, float]:
 
 
 def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
-    """Is f (cycles/sample) a line of some input's periodogram (±2 bins, LINE_RATIO × its median)?"""
+    """Is f (cycles/sample) within ±1 bin of a line of a periodic (line-spectrum) input? A broadband
+    input (noise, a dense multisine) has no lines in this sense: a disturbance in its band is tested
+    by its added-term test like any other cause."""
     n = U.shape[0]
     for j in range(U.shape[1]):
         u = U[:, j] - U[:, j].mean()
         if not np.any(u):
             continue
         per = np.abs(np.fft.rfft(u)) ** 2
+        order = np.argsort(per)[::-1]
+        m = int(np.searchsorted(np.cumsum(per[order]) / per.sum(), 0.9)) + 1
+        if m > SPARSE_LINES:
+            continue
         k = int(round(f_cyc * n))
-        lo, hi = max(1, k - 2), min(len(per), k + 3)
-        if lo < hi and per[lo:hi].max() > LINE_RATIO * np.median(per[1:]):
+        if np.any(np.abs(order[:m] - k) <= 1):
             return True
     return False
 

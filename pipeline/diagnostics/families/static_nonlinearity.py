@@ -3,7 +3,7 @@ over the names the nominal equation already uses (its own physics, no coupling b
 
 * states z: ``z**2``, ``sqrt(z)`` (z > 0 on the simulated record: a square-root outflow), ``z*abs(z)``
   (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)`` (s the
-  state's spread);
+  state's spread; sign-changing states only, on a one-signed state it is the ``offset``);
 * inputs u: ``u**2`` (a lamp's power ∝ V²), ``abs(u)`` (sign-changing inputs), ``sqrt(u)`` (u > 0);
 * products ``z*u`` of a state and an input of the equation.
 
@@ -29,7 +29,7 @@ def library(ctx: Context, eq: str) -> list[str]:
         if z not in ctx.structure.velocities or not ctx.structure.kin:
             out.append(f"{z}*abs({z})")
         s = float(np.std(x))
-        if s > 0:
+        if s > 0 and min(np.mean(x > 0), np.mean(x < 0)) >= 0.05:   # tanh of a one-signed state is an offset
             out.append(f"tanh({z}/{s:.6g})")
     for u in inputs:
         x = ctx.U[sl, m.inputs.index(u)]
