@@ -248,7 +248,7 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
             raise DataError(f"time column {src.time!r} is not strictly increasing at row {i} "
                             f"({t[i - 1]!r} then {t[i]!r})", file=f, key=key)
         dt = float(np.median(d))
-        jitter = float(np.max(np.abs(d - dt)) / dt)
+        jitter = max(float(d.max()) - dt, dt - float(d.min())) / dt   # max |d - dt| / dt, no temporaries
         if not np.isfinite(dt) or not np.isfinite(jitter):
             raise DataError(f"time column {src.time!r} gives a sampling interval of {dt!r} s; give seconds",
                             file=f, key=key)
