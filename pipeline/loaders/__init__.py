@@ -51,9 +51,10 @@ def read_columns(path: Path, spec: ReadSpec, needed: dict[str, str], *, time: st
 
     ``time`` names the time column (a non-numeric value there gets the "give seconds" message);
     ``key`` is the config key of the record (e.g. ``data.validation``), added to every message."""
-    check_file(path, spec.max_bytes, key=key)
-    fmt = resolve_format(path, spec.format, key=key)
+    path_key = f"{key or 'data'}.path"    # problems of the file as a whole name the key that chose it
+    check_file(path, spec.max_bytes, key=path_key)
+    fmt = resolve_format(path, spec.format, key=path_key)
     if fmt in ("csv", "table"):
-        check_text(path, fmt, key=key)
+        check_text(path, fmt, key=path_key)
     spec = replace(spec, format=fmt)
     return _READERS[fmt](path, spec, needed, time, key)

@@ -39,8 +39,8 @@ def _first_lines(path: Path, spec: ReadSpec, f: str, key: str | None) -> tuple[i
                 if s and not (spec.comment and s.startswith(spec.comment)):
                     return i, line.rstrip("\r\n")
     except UnicodeDecodeError as exc:
-        raise DataError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start} of a "
-                        "block); save the file as UTF-8", file=f, key=key) from None
+        raise DataError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} is not valid UTF-8); save the "
+                        "file as UTF-8", file=f, key=key) from None
     where = f" after data.skip_rows = {spec.skip_rows} lines" if spec.skip_rows else ""
     raise DataError(f"no data lines{where} (only blank or comment lines)", file=f, key=key)
 
