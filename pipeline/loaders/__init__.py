@@ -45,6 +45,20 @@ def resolve_format(path: Path, fmt: str | None, *, key: str | None = None) -> st
     return fmt
 
 
+def _check_options(path: Path, spec: ReadSpec, fmt: str, key: str) -> None:
+    """Options that do not apply to the file's format are an error, not silently ignored."""
+    given = {"columns": spec.columns is not None and fmt != "table",
+             "delimiter": spec.delimiter is not None and fmt not in ("csv", "table"),
+             "decimal": spec.decimal != "." and fmt not in ("csv", "table"),
+             "comment": spec.comment is not None and fmt not in ("csv", "table"),
+             "skip_rows": spec.skip_rows != 0 and fmt not in ("csv", "table")}
+    for opt, bad in given.items():
+        if bad:
+            what = "headerless tables (data.format: table)" if opt == "columns" else "text formats (csv, table)"
+            raise DataError(f"only for {what}; this file is read as {fmt}", file=str(path),
+                            key=f"{key}.{opt}")
+
+
 def read_columns(path: Path, spec: ReadSpec, needed: dict[str, str], *, time: str | None = None,
                  key: str | None = None) -> dict[str, np.ndarray]:
     """float64 arrays of the columns ``needed`` (name -> role, e.g. "input", for messages) of ``path``.
@@ -54,6 +68,7 @@ def read_columns(path: Path, spec: ReadSpec, needed: dict[str, str], *, time: st
     path_key = f"{key or 'data'}.path"    # problems of the file as a whole name the key that chose it
     check_file(path, spec.max_bytes, key=path_key)
     fmt = resolve_format(path, spec.format, key=path_key)
+    _check_options(path, spec, fmt, key or "data")
     if fmt in ("csv", "table"):
         check_text(path, fmt, key=path_key)
     spec = replace(spec, format=fmt)

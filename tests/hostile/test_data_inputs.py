@@ -174,6 +174,15 @@ def c_table_long_line(d):
     return {"path": "rec.dat", "columns": ["t", "u", "x"]}, {}, ["{dir}/rec.dat", "line 124"]
 
 
+def c_columns_for_csv(d):
+    return {"columns": ["t", "u", "x"]}, {}, ["{dir}/rec.csv", "data.columns", "only for headerless tables"]
+
+
+def c_skip_rows_for_parquet(d):
+    _frame().to_parquet(d / "rec.parquet")
+    return {"path": "rec.parquet", "skip_rows": 2}, {}, ["{dir}/rec.parquet", "data.skip_rows", "read as parquet"]
+
+
 def c_decimal_is_delimiter(d):
     return {"decimal": ","}, {}, ["{dir}/rec.csv", "data.decimal"]
 
