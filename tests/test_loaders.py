@@ -283,3 +283,10 @@ def test_state_variable_filter_output_index_is_checked(tmp_path):
     step = PrefilterStepCfg(name="state_variable_filter", params={"order": 2, "omega_c": 5.0, "output": 2})
     apply_prefilters(rec, [step], "c.yaml")
     assert rec.n == 700
+
+
+def test_text_without_line_breaks_is_refused_after_one_mebibyte(tmp_path):
+    from pipeline.loaders.text import MAX_LINE
+    (tmp_path / "d.csv").write_text("u,y" + ",1" * (MAX_LINE // 2))
+    with pytest.raises(DataError, match="line 1 is longer than 1048576 characters"):
+        _load(tmp_path, {"path": "d.csv", "sample_time": 0.1, "inputs": ["u"], "outputs": ["y"]})

@@ -26,18 +26,23 @@ from ..errors import DataError
 from . import columns as msg
 from .spec import ReadSpec
 
+MAX_LINE = 1 << 20   # characters of the header / first data line (a file without line breaks is no table)
+
 
 def _first_lines(path: Path, spec: ReadSpec, f: str, key: str | None) -> tuple[int, str]:
     """(physical line index, text) of the first line after ``skip_rows`` that is neither blank nor a
     comment: the header of a csv, the first data line of a table."""
     try:
         with open(path, encoding="utf-8-sig", newline=None) as fh:
-            for i, line in enumerate(fh):
-                if i < spec.skip_rows:
-                    continue
+            i = 0
+            while line := fh.readline(MAX_LINE + 1):
+                if len(line) > MAX_LINE:
+                    raise DataError(f"line {i + 1} is longer than {MAX_LINE} characters; is this delimited text "
+                                    "with line breaks?", file=f, key=key)
                 s = line.strip()
-                if s and not (spec.comment and s.startswith(spec.comment)):
+                if i >= spec.skip_rows and s and not (spec.comment and s.startswith(spec.comment)):
                     return i, line.rstrip("\r\n")
+                i += 1
     except UnicodeDecodeError as exc:
         raise DataError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} is not valid UTF-8); save the "
                         "file as UTF-8", file=f, key=key) from None
