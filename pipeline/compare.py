@@ -105,7 +105,6 @@ class Comparer:
         self.est_rows = np.arange(*split.est)
         self.all_measured = all(s in rec.outputs for s in model.states)
         self.out_names = list(rec.outputs)
-        self._check_estimators()
         ts = self.sc.takagi_sugeno
         for v in (ts.inputs or []) if ts else []:
             if v not in self.data:
@@ -113,27 +112,6 @@ class Comparer:
                                   file=self.file, key="structures.takagi_sugeno.inputs")
         self.Y = np.column_stack([rec.outputs[k] for k in self.out_names])
         self.U = rec.u_matrix(list(model.inputs))
-
-    def _check_estimators(self) -> None:
-        """Every estimator option is a keyword of that estimator (bad names fail before any fit)."""
-        import inspect
-
-        from .estimators import ml, rls
-        source = {"rls": rls.rls}                       # rls.fit forwards **options to rls.rls
-        extra = {"map": {"prior_mean", "prior_sd"}, "mcmc": {"prior_mean", "prior_sd"}}
-        internal = {"prior", "instruments", "regressors", "target", "phi", "y"}
-        for name, opts in self.lc.cfg.estimator_list():
-            sig = inspect.signature(source.get(name, ESTIMATORS[name]))
-            allowed = ({k for k, p in sig.parameters.items() if p.kind == p.KEYWORD_ONLY or
-                        (p.kind == p.POSITIONAL_OR_KEYWORD and p.default is not p.empty)}
-                       | extra.get(name, set())) - internal
-            for k in opts:
-                if k not in allowed:
-                    raise ConfigError(f"unknown option {k!r}; {name} takes {', '.join(sorted(allowed)) or 'none'}",
-                                      file=self.file, key=f"estimators.{name}")
-            if name == "ml" and opts.get("density", "gaussian") not in ml.DENSITIES:
-                raise ConfigError(f"unknown density {opts['density']!r}; expected one of {', '.join(ml.DENSITIES)}",
-                                  file=self.file, key="estimators.ml.density")
 
     # -- helpers -----------------------------------------------------------------------------------
     def _eval(self, expr, rows=None) -> np.ndarray:

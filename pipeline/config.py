@@ -8,16 +8,29 @@ naming the file and the dotted key.
 
 from __future__ import annotations
 
+import builtins
 import hashlib
 import json
+import keyword
+import unicodedata
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, StrictStr, ValidationError, field_validator
 
 from .errors import ConfigError
-from .expressions import FUNCTIONS, Expr, parse
+from .expressions import CONSTANTS, FUNCTIONS, Expr, parse
+from .numbers import Finite, Integer, Seed
+
+MAX_CONFIG_BYTES = 4 << 20      # a config is text a person wrote: 4 MiB is far beyond any real one
+MAX_YAML_DEPTH = 50             # nesting depth of YAML mappings and lists
+MAX_STATES = 100                # one kernel per structure: compile time grows with the equations
+MAX_PARAMS = 2000
+# names a model may not use: Python keywords, the generated code's own names, functions and constants
+RESERVED_NAMES = (set(keyword.kwlist) | set(keyword.softkwlist) | set(FUNCTIONS) | set(CONSTANTS)
+                  | {"t", "np", "min", "max", "abs", "xs", "uu", "p", "dx", "k_eq", "k_kind", "k_var", "k_pow",
+                     "k_pc", "k_pf", "math", "numba"} | {n for n in dir(builtins) if not n.startswith("_")})
 
 FAMILIES_V1 = ("offset", "output_offset", "cubic_stiffness", "quadratic_damping", "coulomb_friction",
                "periodic_disturbance", "input_delay", "colored_noise", "heavy_tailed_noise",
@@ -59,7 +72,7 @@ class _ReadCfg(_Strict):
     delimiter: str | None = Field(default=None, min_length=1, max_length=1)  # csv ","; table: whitespace
     decimal: Literal[".", ","] | None = None                     # default "."
     comment: str | None = Field(default=None, min_length=1, max_length=1)  # default "#" (table only)
-    skip_rows: int | None = Field(default=None, ge=0)           # lines skipped before header/data
+    skip_rows: Annotated[Integer, Field(ge=0)] | None = None   # lines skipped before header/data
 
     @field_validator("columns")
     @classmethod
@@ -74,7 +87,7 @@ class ExperimentCfg(_ReadCfg):
     name: str | None = Field(default=None, min_length=1)
     path: str | None = None
     time: str | None = None
-    sample_time: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    sample_time: Annotated[Finite, Field(gt=0)] | None = None
     inputs: Union[list[str], dict[str, str], None] = None
     outputs: Union[list[str], dict[str, str], None] = None
     role: Literal["estimation", "validation"] | None = None
@@ -88,17 +101,17 @@ class ExperimentCfg(_ReadCfg):
 class DataCfg(_ReadCfg):
     path: str
     time: str | None = None
-    sample_time: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    sample_time: Annotated[Finite, Field(gt=0)] | None = None
     inputs: Union[list[str], dict[str, str]] = Field(default_factory=list)
     outputs: Union[list[str], dict[str, str]]
     intersample: Literal["zoh", "foh"] = "zoh"
-    remove_mean: bool = False
+    remove_mean: StrictBool = False
     # largest tolerated relative deviation of a sampling interval from the median one
-    max_jitter: float = Field(default=0.01, ge=0, allow_inf_nan=False)
-    min_samples: int = Field(default=50, ge=4)
+    max_jitter: Annotated[Finite, Field(ge=0, le=0.5)] = 0.01
+    min_samples: Annotated[Integer, Field(ge=4)] = 50
     # bounds checked before a file is read: its size (and, for .mat/Parquet, its decoded size) and rows
-    max_bytes: int = Field(default=2 << 30, ge=1)
-    max_samples: int = Field(default=50_000_000, ge=1)
+    max_bytes: Annotated[Integer, Field(ge=1)] = 2 << 30
+    max_samples: Annotated[Integer, Field(ge=1)] = 50_000_000
     # separate records: one validation record, or a list of experiments with roles (contract §4)
     validation: ExperimentCfg | None = None
     experiments: list[ExperimentCfg] | None = Field(default=None, min_length=1)
@@ -109,35 +122,37 @@ class DataCfg(_ReadCfg):
         return _unique_targets(v)
 
 
-InitialValue = Union[float, Literal["data", "estimate"]]
+InitialValue = Union[Finite, Literal["data", "estimate"]]
 
 
 class ModelCfg(_Strict):
     states: list[str] = Field(min_length=1)
     inputs: list[str] = Field(default_factory=list)
-    params: dict[str, float] = Field(default_factory=dict)
+    params: dict[str, Finite] = Field(default_factory=dict)
     free: list[str] = Field(default_factory=list)
-    equations: dict[str, Union[str, float]]
-    initial: Union[dict[str, InitialValue], Literal["data", "estimate"], float] = 0.0
-    outputs: dict[str, str] = Field(default_factory=dict)  # declared outputs: name -> expression
-    substeps: int = Field(default=1, ge=1, le=64)  # RK4 sub-steps per sample interval
+    equations: dict[str, Union[StrictStr, Finite]]
+    initial: Union[dict[str, InitialValue], Literal["data", "estimate"], Finite] = 0.0
+    outputs: dict[str, StrictStr] = Field(default_factory=dict)  # declared outputs: name -> expression
+    substeps: Annotated[Integer, Field(ge=1, le=64)] = 1  # RK4 sub-steps per sample interval
+    # dead time of every input (seconds): u(t - input_delay); written back by extended.yaml
+    input_delay: Annotated[Finite, Field(ge=0)] | None = None
 
 
 class SplitCfg(_Strict):
-    validation_fraction: float = Field(default=0.3, gt=0, lt=1)
-    estimation: tuple[int, int | None] | None = None
-    validation: tuple[int, int | None] | None = None
+    validation_fraction: Annotated[Finite, Field(gt=0, lt=1)] = 0.3
+    estimation: tuple[Integer, Integer | None] | None = None
+    validation: tuple[Integer, Integer | None] | None = None
     # fitting simulations start this many samples before the estimation part (from the configured
     # initial state) instead of at sample 0; reported errors always use the simulation from sample 0
-    warmup: int | None = Field(default=None, ge=0)
+    warmup: Annotated[Integer, Field(ge=0)] | None = None
 
 
 class DiagnoseCfg(_Strict):
     families: Union[Literal["all"], list[str]] = "all"
-    alpha: float = Field(default=0.01, gt=0, lt=0.5)
-    max_findings: int = Field(default=3, ge=0, le=10)
-    max_delay_s: float | None = Field(default=None, gt=0)  # search range for input_delay
-    bootstrap: int = Field(default=400, ge=50, le=10000)
+    alpha: Annotated[Finite, Field(gt=0, lt=0.5)] = 0.01
+    max_findings: Annotated[Integer, Field(ge=0, le=10)] = 3
+    max_delay_s: Annotated[Finite, Field(gt=0)] | None = None  # search range for input_delay
+    bootstrap: Annotated[Integer, Field(ge=50, le=10000)] = 400
 
     @field_validator("families")
     @classmethod
@@ -146,6 +161,10 @@ class DiagnoseCfg(_Strict):
             bad = [f for f in v if f not in ALL_FAMILY_IDS]
             if bad:
                 raise ValueError(f"unknown family {bad[0]!r}; known: {', '.join(ALL_FAMILY_IDS)}")
+            missing = [f for f in v if f not in FAMILIES_V1]
+            if missing:
+                raise ValueError(f"family {missing[0]!r} is in the contract but not implemented in this version; "
+                                 f"implemented: {', '.join(FAMILIES_V1)}")
         return v
 
 
@@ -156,25 +175,26 @@ class PrefilterStepCfg(_Strict):
     """One prefilter step (pipeline.prefilter): name, parameters, and the signals it applies to."""
 
     name: Literal["remove_mean", "remove_trend", "lowpass", "state_variable_filter", "notch", "decimate"]
-    params: dict[str, Union[float, int, str, bool, None]] = Field(default_factory=dict)
+    params: dict[str, Annotated[Union[StrictBool, StrictInt, Finite, StrictStr, None],
+                                Field(union_mode="left_to_right")]] = Field(default_factory=dict)
     signals: list[str] | None = None   # model names (inputs/outputs); default: all
 
 
 class DerivativeCfg(_Strict):
     method: Literal["fd", "savgol", "spline", "tv"] = "savgol"
-    window: int = Field(default=11, ge=3)
-    polyorder: int = Field(default=3, ge=1)
+    window: Annotated[Integer, Field(ge=3, le=10_001)] = 11
+    polyorder: Annotated[Integer, Field(ge=1, le=10)] = 3
 
 
 class LibraryCfg(_Strict):
     """Candidate terms generated from a library (union of the listed families) for ERR/FROLS."""
 
-    poly: dict[str, Union[list[str], int, bool]] | None = None   # {vars: [x], degree: 3}
+    poly: dict[str, Union[list[str], StrictBool, Integer]] | None = None   # {vars: [x], degree: 3}
     tanh: list[str] | None = None
     rational: list[str] | None = None
     sign: list[str] | None = None
     terms: list[str] | None = None
-    max_terms: int = Field(default=8, ge=1, le=100)
+    max_terms: Annotated[Integer, Field(ge=1, le=100)] = 8
     criterion: Literal["bic", "aic", "aicc", "fpe"] = "bic"
 
 
@@ -182,7 +202,9 @@ class SindyCfg(_Strict):
     """SINDy on the unknown part of the equation (pipeline.structures.sindy): threshold(s), several
     chosen by blocked CV; the library is ``terms`` or a cubic polynomial in the equation's state."""
 
-    threshold: Union[float, list[float]] = Field(default_factory=lambda: [0.01, 0.05, 0.1, 0.5])
+    threshold: Union[Annotated[Finite, Field(ge=0)], Annotated[list[Annotated[Finite, Field(ge=0)]],
+                                                                Field(min_length=1, max_length=50)]] = \
+        Field(default_factory=lambda: [0.01, 0.05, 0.1, 0.5])
     optimizer: Literal["stlsq", "sr3"] = "stlsq"
     terms: list[str] | None = None
 
@@ -191,7 +213,8 @@ class TakagiSugenoCfg(_Strict):
     """Takagi–Sugeno model of the unknown part: premise signals, candidate rule counts (K by CV)."""
 
     inputs: list[str] | None = None       # default: the equation's state
-    rules: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [2, 5, 11], min_length=1)
+    rules: list[Annotated[Integer, Field(ge=1, le=200)]] = Field(default_factory=lambda: [2, 5, 11], min_length=1,
+                                                                  max_length=20)
     method: Literal["global", "local"] = "global"
 
 
@@ -199,19 +222,19 @@ class StructuresCfg(_Strict):
     """Candidate structures for one state equation: d(equation)/dt = known + Σ θ_i term_i."""
 
     equation: str
-    known: Union[str, float] = 0.0
+    known: Union[StrictStr, Finite] = 0.0
     candidates: dict[str, list[str]] = Field(default_factory=dict)
     library: LibraryCfg | None = None
     sindy: SindyCfg | None = None
     takagi_sugeno: TakagiSugenoCfg | None = None
     derivative: DerivativeCfg = Field(default_factory=DerivativeCfg)
-    cv_folds: int = Field(default=10, ge=2, le=50)
-    cv_gap: int = Field(default=10, ge=0)
+    cv_folds: Annotated[Integer, Field(ge=2, le=50)] = 10
+    cv_gap: Annotated[Integer, Field(ge=0)] = 10
 
 
 class Config(_Strict):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
-    seed: int = 0
+    seed: Seed = 0
     data: DataCfg
     model: ModelCfg
     split: SplitCfg = Field(default_factory=SplitCfg)
@@ -219,8 +242,8 @@ class Config(_Strict):
     prefilter: list[PrefilterStepCfg] = Field(default_factory=list)
     structures: StructuresCfg | None = None
     # estimators run on every candidate structure: names or {name: {options}}
-    estimators: list[Union[str, dict[str, dict[str, Union[float, int, str, bool, list[float], None]]]]] = \
-        Field(default_factory=lambda: ["ls"])
+    estimators: Annotated[list[Union[StrictStr, dict[str, Union[dict[str, object], None]]]],
+                          Field(max_length=50)] = Field(default_factory=lambda: ["ls"])
 
     @field_validator("estimators")
     @classmethod
@@ -233,12 +256,14 @@ class Config(_Strict):
         return v
 
     def estimator_list(self) -> list[tuple[str, dict]]:
+        """(name, options) pairs with options checked by :mod:`pipeline.estimators.options`."""
+        from .estimators.options import validate
         out = []
         for item in self.estimators:
             if isinstance(item, str):
                 out.append((item, {}))
             else:
-                out.extend((k, dict(o or {})) for k, o in item.items())
+                out.extend((k, validate(k, dict(o or {}))) for k, o in item.items())
         return out
 
 
@@ -275,56 +300,166 @@ def _fmt_loc(loc: tuple) -> str:
     return ".".join(str(x) for x in loc if not str(x).startswith(("function-", "literal[", "union[")))
 
 
+class _Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 booleans (only true/false: ``off``, ``no``, ``on``, ``yes`` stay strings,
+    so a key ``off`` is not silently ``False``) and duplicate keys as errors (PyYAML keeps the last one)."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    k: [(tag, rx) for tag, rx in v if tag != "tag:yaml.org,2002:bool"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_BOOL12 = __import__("re").compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+for _first in "tTfF":
+    _Loader.yaml_implicit_resolvers.setdefault(_first, []).insert(0, ("tag:yaml.org,2002:bool", _BOOL12))
+
+
+def _bool12(loader, node):
+    return loader.construct_scalar(node).lower() == "true"
+
+
+def _mapping_no_duplicates(loader, node, deep=False):
+    seen = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        try:
+            hash(key)
+        except TypeError:
+            raise yaml.constructor.ConstructorError(None, None, "a mapping key must be a plain value",
+                                                    key_node.start_mark) from None
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r} (first at line {seen[key] + 1})", key_node.start_mark)
+        seen[key] = key_node.start_mark.line
+    return loader.construct_mapping(node, deep=deep)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:bool", _bool12)
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping_no_duplicates)
+
+
+def _depth(obj, limit: int) -> int:
+    """Nesting depth of lists and mappings, iteratively (never a RecursionError); stops past ``limit``."""
+    stack, deepest = [(obj, 1)], 0
+    while stack:
+        o, d = stack.pop()
+        if isinstance(o, (dict, list)):
+            deepest = max(deepest, d)
+            if deepest > limit:
+                return deepest
+            stack.extend((c, d + 1) for c in (o.values() if isinstance(o, dict) else o))
+    return deepest
+
+
+def read_yaml(path: Path, *, what: str = "config", max_bytes: int = MAX_CONFIG_BYTES):
+    """Parse a YAML file under the limits above; ConfigError naming the file otherwise."""
+    fname = str(path)
+    if path.is_dir():
+        raise ConfigError(f"is a directory; expected a YAML {what} file", file=fname)
+    if not path.is_file():
+        raise ConfigError(f"{what} file not found", file=fname)
+    size = path.stat().st_size
+    if size > max_bytes:
+        raise ConfigError(f"{size} bytes; a {what} file may hold at most {max_bytes} bytes", file=fname)
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(max_bytes + 1).decode("utf-8")
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        what_ = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"not valid YAML{where}: {what_}", file=fname) from None
+    except UnicodeDecodeError:
+        raise ConfigError("not a UTF-8 text file", file=fname) from None
+    except RecursionError:
+        raise ConfigError(f"YAML nested too deeply (at most {MAX_YAML_DEPTH} levels)", file=fname) from None
+
+
 def load_config(path: str | Path) -> LoadedConfig:
     """Read, validate and check a YAML config. Raises ConfigError (file, key, expectation)."""
     path = Path(path)
     fname = str(path)
-    if not path.is_file():
-        raise ConfigError("config file not found", file=fname)
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ConfigError(f"not valid YAML{where}: {what}", file=fname) from None
-    except UnicodeDecodeError:
-        raise ConfigError("not a UTF-8 text file", file=fname) from None
+    raw = read_yaml(path)
     if not isinstance(raw, dict):
         raise ConfigError("expected a YAML mapping at the top level", file=fname)
+    if _depth(raw, MAX_YAML_DEPTH) > MAX_YAML_DEPTH:
+        raise ConfigError(f"YAML nested too deeply (at most {MAX_YAML_DEPTH} levels)", file=fname)
+    bad_keys = _non_string_keys(raw)
+    if bad_keys:
+        raise ConfigError(f"keys must be text, got {bad_keys[1]!r}", file=fname, key=bad_keys[0] or "(top level)")
     try:
         cfg = Config.model_validate(raw)
     except ValidationError as exc:
-        lines = []
-        for err in exc.errors():
-            key = _fmt_loc(err["loc"]) or "(top level)"
-            msg = err["msg"]
-            if err["type"] == "extra_forbidden":
-                msg = "unknown key"
-            elif err["type"] == "missing":
-                msg = "required key is missing"
-            lines.append(f"{key}: {msg}")
-        # one message: the first problem, then any others
-        uniq = list(dict.fromkeys(lines))
-        raise ConfigError("; ".join(uniq[:5]), file=fname) from None
+        raise ConfigError(_validation_message(exc), file=fname) from None
     return _check(cfg, path)
+
+
+def _non_string_keys(obj, where: str = ""):
+    """(dotted location, key) of the first mapping key that is not a string (``1: x``, ``null: y``)."""
+    stack = [(obj, where)]
+    while stack:
+        o, w = stack.pop()
+        if isinstance(o, dict):
+            for k, v in o.items():
+                if not isinstance(k, str):
+                    return (w, k)
+                stack.append((v, f"{w}.{k}" if w else k))
+        elif isinstance(o, list):
+            stack.extend((v, f"{w}[{i}]") for i, v in enumerate(o))
+    return None
+
+
+def _validation_message(exc: ValidationError, prefix: str = "") -> str:
+    lines = []
+    for err in exc.errors():
+        key = _fmt_loc(err["loc"])
+        key = (f"{prefix}.{key}" if key else prefix) if prefix else (key or "(top level)")
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif err["type"] == "missing":
+            msg = "required key is missing"
+        msg = msg.removeprefix("Value error, ")
+        lines.append(f"{key}: {msg}")
+    # one message: the first problem, then any others
+    uniq = list(dict.fromkeys(lines))
+    return "; ".join(uniq[:5])
+
+
+def _check_name(n: str, kind: str, f: str) -> None:
+    """A model name: an ASCII-or-Unicode identifier in NFKC normal form (Python normalises identifiers,
+    so ``ｋ`` would silently be ``k``), not a keyword, not a name the generated code or the language uses."""
+    if not isinstance(n, str) or not n.isidentifier():
+        raise ConfigError(f"{n!r} is not a valid name (letters, digits and _, not starting with a digit)",
+                          file=f, key=kind)
+    norm = unicodedata.normalize("NFKC", n)
+    if norm != n:
+        raise ConfigError(f"{n!r} reads as {norm!r} once normalised (NFKC); write {norm!r}", file=f, key=kind)
+    if n in RESERVED_NAMES or n.startswith("_"):
+        raise ConfigError(f"{n!r} is reserved (a Python keyword or builtin, a function, pi, t, np, or a name "
+                          "of the generated code); choose another name", file=f, key=kind)
+    if len(n) > 64:
+        raise ConfigError(f"name of {len(n)} characters; at most 64", file=f, key=kind)
 
 
 def _check(cfg: Config, path: Path) -> LoadedConfig:
     f = str(path)
     m = cfg.model
-    reserved = set(FUNCTIONS) | {"t", "np", "pi"}
+    if len(m.states) > MAX_STATES:
+        raise ConfigError(f"{len(m.states)} states; at most {MAX_STATES} are supported", file=f, key="model.states")
+    if len(m.params) > MAX_PARAMS:
+        raise ConfigError(f"{len(m.params)} parameters; at most {MAX_PARAMS}", file=f, key="model.params")
     seen: dict[str, str] = {}
     for kind, names in (("model.states", m.states), ("model.inputs", m.inputs),
                         ("model.params", list(m.params)), ("model.outputs", list(m.outputs))):
         for n in names:
-            if not n.isidentifier():
-                raise ConfigError(f"{n!r} is not a valid name", file=f, key=kind)
-            if n in reserved:
-                raise ConfigError(f"{n!r} is reserved (a function name or t)", file=f, key=kind)
+            _check_name(n, kind, f)
             if n in seen:
                 raise ConfigError(f"{n!r} is declared twice (also in {seen[n]})", file=f, key=kind)
             seen[n] = kind
+    if len(set(m.free)) != len(m.free):
+        dup = next(p for p in m.free if m.free.count(p) > 1)
+        raise ConfigError(f"{dup!r} is listed twice", file=f, key="model.free")
     if set(m.equations) != set(m.states):
         missing = [s for s in m.states if s not in m.equations]
         extra = [s for s in m.equations if s not in m.states]
@@ -374,6 +509,13 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
         if rng is not None and (rng[0] < 0 or (rng[1] is not None and rng[1] <= rng[0])):
             raise ConfigError(f"expected [start, stop) with 0 <= start < stop, got {list(rng)}",
                               file=f, key=f"split.{key}")
+    from .estimators.options import validate as _validate_options
+    for i, item in enumerate(cfg.estimators):
+        for name, opts in ([(item, {})] if isinstance(item, str) else list(item.items())):
+            try:
+                _validate_options(name, opts or {})
+            except ValidationError as exc:
+                raise ConfigError(_validation_message(exc, f"estimators[{i}].{name}"), file=f) from None
     if cfg.structures is not None:
         st = cfg.structures
         if st.equation not in m.states:

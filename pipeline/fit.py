@@ -1,20 +1,31 @@
 """Fitting the free parameters of a grey-box model.
 
 * Output error (always): minimise Σ_k ‖W (y_k − ŷ_k(θ))‖² over the estimation samples, ŷ the free-run
-  simulation from sample 0 (scipy ``least_squares``, trust-region reflective, Jacobian by finite
-  differences). W scales each output by 1/std so outputs of different units weigh alike.
+  simulation (scipy ``least_squares``, trust-region reflective, Jacobian by finite differences). W scales
+  each output by 1/std so outputs of different units weigh alike.
 * Equation error (a fast start when every state is measured): least squares on
   ẋ_k − f(x_k, u_k; θ) with ẋ from central differences.
-* Standard errors from the Jacobian: cov(θ̂) = σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18
-  for the prediction-error estimate with white output noise).
+* Covariance: cov(θ̂) = σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18, white output noise),
+  computed from the column-scaled Jacobian J D (D = diag 1/‖J_j‖, so a coefficient of 5e7 next to one of
+  0.3 does not make JᵀJ numerically singular) through its SVD with an explicit rank decision: singular
+  values below ``RANK_RTOL`` × the largest are directions the data cannot determine (a finite-difference
+  Jacobian is accurate to about √ε ≈ 1.5e-8). Parameters with weight in such a direction get no standard
+  error (NaN) and the direction is reported (:class:`Identifiability`). With a robust loss, J is the
+  Jacobian of the plain weighted residual at θ̂, not scipy's loss-modified one.
 
-The simulation runs from sample 0 over every sample up to the end of the estimation part, so
-validation samples that come before it (e.g. Silverbox's "arrow") are simulated but never scored here.
+**Segments.** The record is simulated in segments, each from its own initial state: separate experiments
+(``Record.segments``: an estimation and a validation record), and, with ``split.warmup``, the
+estimation part is simulated from ``warmup`` samples before it, from the configured initial state. That
+one simulation is the one minimised, tested (residuals, Jacobian, BIC, Wald tests, noise stage) and
+reported for the estimation part; samples before the warm-up start are simulated from sample 0 as their
+own segment (Silverbox's "arrow"). The estimated initial state ``x0`` belongs to the segment holding the
+start of the estimation part; another segment starts from the measured sample for measured states and
+from the same values as the estimation segment for unmeasured ones.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -24,10 +35,12 @@ from .errors import ConfigError, SimulationError
 from .model import Model, rhs_vectorized
 from .simulate import outputs, simulate_states
 
+RANK_RTOL = 1e-7
+
 
 @dataclass
 class Problem:
-    """What a fit needs from the record: time, input, measured outputs and the split."""
+    """What a fit needs from the record: time, input, measured outputs, the split and the segments."""
 
     t: np.ndarray
     U: np.ndarray
@@ -35,15 +48,24 @@ class Problem:
     out_names: list[str]
     split: Split
     bound: float
-    sim_start: int = 0            # fitting simulations start here (split.warmup), not at sample 0
+    restarts: tuple[int, ...] = ()   # sample indices where the simulation restarts (segment starts > 0)
+    warmup_start: int | None = None  # the estimation part's simulation starts here (split.warmup)
 
     @classmethod
     def from_record(cls, rec: Record, model: Model, split: Split, warmup: int | None = None) -> "Problem":
         names = list(rec.outputs)
         Y = np.column_stack([rec.outputs[k] for k in names])
         scale = max(1.0, float(np.max(np.abs(Y))))
-        start = 0 if warmup is None else max(0, split.est[0] - warmup)
-        return cls(rec.t, rec.u_matrix(list(model.inputs)), Y, names, split, bound=1e6 * scale, sim_start=start)
+        restarts = {sg.start for sg in getattr(rec, "segments", []) if sg.start > 0}
+        ws = None
+        if warmup is not None:
+            ws = max(0, split.est[0] - warmup)
+            seg0 = max([0] + [r for r in restarts if r <= split.est[0]])
+            ws = max(ws, seg0)
+            if ws > 0:
+                restarts.add(ws)
+        return cls(rec.t, rec.u_matrix(list(model.inputs)), Y, names, split, bound=1e6 * scale,
+                   restarts=tuple(sorted(restarts)), warmup_start=ws)
 
     @property
     def weights(self) -> np.ndarray:
@@ -51,22 +73,50 @@ class Problem:
         s = np.std(self.Y[sl], axis=0)
         return 1.0 / np.where(s > 0, s, 1.0)
 
+    def segments(self) -> list[tuple[int, int]]:
+        """[start, stop) of each simulated segment, in order, covering the record."""
+        cuts = [0] + [r for r in self.restarts if 0 < r < len(self.t)] + [len(self.t)]
+        return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+    def fit_segment(self) -> tuple[int, int]:
+        """The segment that holds the first estimation sample (its x0 is the fitted one)."""
+        e0 = self.split.est[0]
+        return next(sg for sg in self.segments() if sg[0] <= e0 < sg[1])
+
+
+@dataclass
+class Identifiability:
+    """Rank decision on the column-scaled Jacobian (see the module docstring)."""
+
+    rank: int
+    n_params: int
+    condition: float                       # of the scaled Jacobian, largest/smallest singular value
+    directions: list[dict[str, float]] = field(default_factory=list)   # unit null directions (scaled)
+    unidentifiable: list[str] = field(default_factory=list)             # parameters without a std
+
+    def record(self) -> dict:
+        return {"rank": self.rank, "n_params": self.n_params, "condition_scaled": self.condition,
+                "unidentifiable": list(self.unidentifiable), "directions": self.directions,
+                "note": "directions in column-scaled coordinates (each parameter's change times the norm of "
+                        "its Jacobian column): moving along one leaves the fitted simulation unchanged"}
+
 
 @dataclass
 class FitResult:
     model: Model                 # with fitted parameter values
-    x0: np.ndarray               # initial state at sample 0
+    x0: np.ndarray               # initial state at the start of the fit segment
     names: list[str]             # estimated quantities: free params then "x0.<state>"
     theta: np.ndarray
     cov: np.ndarray
     std: np.ndarray
-    Yhat: np.ndarray             # (N, ny) free-run simulated outputs over the whole record
-    resid_est: np.ndarray        # (n_est, ny) y − ŷ on the estimation part
-    jac: np.ndarray              # (n_est*ny, p) Jacobian of the weighted residual
+    Yhat: np.ndarray             # (N, ny) free-run simulated outputs, segment by segment
+    resid_est: np.ndarray        # (n_est, ny) y − ŷ on the estimation part (the fitted simulation)
+    jac: np.ndarray              # (n_est*ny, p) Jacobian of the weighted residual −∂ŷw/∂θ... (sign: of r)
     sse_w: float
     success: bool
     message: str
     nfev: int
+    identifiability: Identifiability | None = None
 
     @property
     def n_params(self) -> int:
@@ -85,8 +135,8 @@ class FitResult:
 
 
 def initial_state(model: Model, prob: Problem, values: dict[str, float] | None = None, at: int = 0) -> np.ndarray:
-    """Resolve the initial state at sample ``at`` (0: the record start): numbers, "data" (the measured
-    sample there) or estimates."""
+    """Resolve the initial state at sample ``at``: numbers, "data" (the measured sample there) or
+    estimates (``values`` ``x0.<state>``; the measured sample as a start)."""
     x0 = np.zeros(len(model.states))
     for i, s in enumerate(model.states):
         spec = model.initial[s]
@@ -103,32 +153,88 @@ def initial_state(model: Model, prob: Problem, values: dict[str, float] | None =
     return x0
 
 
+def segment_x0(model: Model, prob: Problem, start: int, x0_fit: np.ndarray) -> np.ndarray:
+    """Initial state of the segment starting at ``start`` (see the module docstring)."""
+    if start == prob.fit_segment()[0]:
+        return np.asarray(x0_fit, float)
+    x0 = initial_state(model, prob, at=start)
+    for i, s in enumerate(model.states):
+        if model.initial[s] == "estimate" and s not in prob.out_names:
+            x0[i] = x0_fit[i]
+    return x0
+
+
+def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: int) -> np.ndarray | None:
+    """Free-run outputs on rows [0, b), simulating every segment that overlaps [a, b) (rows of other
+    segments are NaN); None if the model diverges in one of them."""
+    out = np.full((b, prob.Y.shape[1]), np.nan)
+    for s0, s1 in prob.segments():
+        if s1 <= a or s0 >= b:
+            continue
+        stop = min(s1, b)
+        res = simulate_states(model, prob.t[s0:stop], prob.U[s0:stop], segment_x0(model, prob, s0, x0_fit),
+                              bound=prob.bound)
+        if res.diverged_at is not None:
+            return None
+        out[s0:stop] = outputs(model, prob.t[s0:stop], prob.U[s0:stop], res.X, prob.out_names)
+    return out
+
+
 def simulate_until(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np.ndarray | None:
-    """Free-run outputs for samples [0, stop) (x0 at sample 0); None if the model diverges. With a
-    warm-up (``prob.sim_start`` > 0) the simulation starts there from the configured initial state
-    and the rows before it are NaN."""
-    a = prob.sim_start
-    if a > 0:
-        x0 = initial_state(model, prob, at=a)
-    res = simulate_states(model, prob.t[a:stop], prob.U[a:stop], x0, bound=prob.bound)
-    if res.diverged_at is not None:
-        return None
-    Y = outputs(model, prob.t[a:stop], prob.U[a:stop], res.X, prob.out_names)
-    if a == 0:
-        return Y
-    full = np.full((stop, Y.shape[1]), np.nan)
-    full[a:] = Y
-    return full
+    """Free-run outputs for rows [0, stop) of the segments that hold the estimation part (the simulation
+    that is fitted); None if the model diverges."""
+    return simulate_rows(model, prob, x0, prob.split.est[0], stop)
 
 
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
-    """Free-run outputs over the whole record from sample 0 (x0), never from a warm-up start: these are
-    the reported numbers. SimulationError if the model diverges."""
-    res = simulate_states(model, prob.t, prob.U, x0, bound=prob.bound)
-    Yh = None if res.diverged_at is not None else outputs(model, prob.t, prob.U, res.X, prob.out_names)
+    """Free-run outputs over the whole record, segment by segment (the reported numbers).
+    SimulationError if the model diverges."""
+    Yh = simulate_rows(model, prob, x0, 0, len(prob.t))
     if Yh is None:
-        raise SimulationError(f"the fitted model diverges on this record (parameters {model.params})")
+        for s0, s1 in prob.segments():
+            res = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
+                                  bound=prob.bound)
+            if res.diverged_at is not None:
+                raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
+                                      f"(parameters {model.params})")
     return Yh
+
+
+def states_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
+    """(N, nx) simulated states over the whole record, segment by segment (NaN after a divergence)."""
+    X = np.full((len(prob.t), len(model.states)), np.nan)
+    for s0, s1 in prob.segments():
+        X[s0:s1] = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
+                                   bound=prob.bound).X
+    return X
+
+
+def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.ndarray, Identifiability]:
+    """σ̂² (JᵀJ)⁻¹ from the column-scaled Jacobian's SVD with the rank decision of the module docstring.
+    J D = U S Vᵀ ⇒ (JᵀJ)⁺ = D V S⁻² Vᵀ D over the kept singular values."""
+    p = J.shape[1]
+    norms = np.linalg.norm(J, axis=0)
+    d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    Js = J * d
+    _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
+    keep = sv > RANK_RTOL * (sv[0] if len(sv) else 0.0)
+    keep &= sv > 0
+    cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+    V = Vt.T
+    Vk = V[:, keep] / sv[keep]
+    cov = s2 * (d[:, None] * (Vk @ Vk.T) * d[None, :])
+    null = V[:, ~keep]
+    bad = set(np.flatnonzero(norms == 0))
+    dirs = []
+    for j in range(null.shape[1]):
+        v = null[:, j]
+        big = np.flatnonzero(np.abs(v) > 0.05)
+        bad |= set(big.tolist())
+        dirs.append({names[i]: float(round(v[i], 6)) for i in big})
+    for i in sorted(bad):
+        cov[i, :] = np.nan
+        cov[:, i] = np.nan
+    return cov, Identifiability(int(keep.sum()), p, cond, dirs, [names[i] for i in sorted(bad)])
 
 
 def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None:
@@ -168,7 +274,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     sw = np.ones((yobs.shape[0], 1)) if sample_weights is None else np.asarray(sample_weights, float)[:, None]
     x0_names = [f"x0.{s}" for s in model.states if model.initial[s] == "estimate"]
     names = list(model.free) + x0_names
-    x0_base = initial_state(model, prob)
+    x0_base = initial_state(model, prob, at=prob.fit_segment()[0])
     th0 = np.array([(start or {}).get(k, model.params[k]) for k in model.free]
                    + [x0_base[model.states.index(n[3:])] for n in x0_names], dtype=float)
     nfree = len(model.free)
@@ -191,24 +297,32 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     if len(th0):
         r0 = resid(th0)
         if r0 is penalty:
-            raise SimulationError("the model diverges with its initial parameter values; check the "
-                                  "equations' signs, model.params and model.initial")
+            m0, x00 = unpack(th0)
+            a, b = prob.fit_segment()
+            why = simulate_states(m0, prob.t[a:stop], prob.U[a:stop], x00, bound=prob.bound)
+            detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
+            raise SimulationError(f"with its initial parameter values, {detail} (model.params, "
+                                  "model.initial)")
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
                             f_scale=f_scale)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)
+        if loss != "linear":
+            # scipy's jac is loss-modified; the covariance needs the plain residual's Jacobian at θ̂
+            from scipy.optimize._numdiff import approx_derivative
+            J = approx_derivative(resid, th, method="2-point")
     else:
         th, J, ok, msg, nfev = th0, np.zeros((yobs.size, 0)), True, "nothing to fit", 0
     m, x0 = unpack(th)
     Yh = simulate_full(m, prob, x0)
-    r = yobs - Yh[est[0]:stop]
+    r = yobs - Yh[est[0]:stop]      # simulate_full uses the same segments: the fitted simulation
     rw = (r * w * sw).ravel()
     sse = float(rw @ rw)
     dof = max(rw.size - len(th), 1)
-    cov = np.full((len(th), len(th)), np.nan)
+    ident = None
     if len(th):
-        try:
-            cov = (sse / dof) * np.linalg.pinv(J.T @ J)
-        except np.linalg.LinAlgError:
-            pass
+        cov, ident = scaled_covariance(J, sse / dof, names)
+    else:
+        cov = np.zeros((0, 0))
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if len(th) else np.zeros(0)
-    return FitResult(m, x0, names, th, cov, std, Yh, r, J, sse, ok, msg, nfev)
+    std = np.where(np.isnan(np.diag(cov)), np.nan, std) if len(th) else std
+    return FitResult(m, x0, names, th, cov, std, Yh, r, J, sse, ok, msg, nfev, ident)

@@ -69,10 +69,14 @@ class Model:
         if not isinstance(init, dict):
             init = {s: init for s in m.states}
         initial = {s: init.get(s, 0.0) for s in m.states}
-        return cls(states=tuple(m.states), inputs=tuple(m.inputs), equations=dict(lc.equations),
-                   output_exprs=dict(lc.output_exprs), params={k: float(v) for k, v in m.params.items()},
-                   free=tuple(m.free), initial=initial, substeps=m.substeps,
-                   intersample=lc.cfg.data.intersample, nominal_params=tuple(m.params))
+        model = cls(states=tuple(m.states), inputs=tuple(m.inputs), equations=dict(lc.equations),
+                    output_exprs=dict(lc.output_exprs), params={k: float(v) for k, v in m.params.items()},
+                    free=tuple(m.free), initial=initial, substeps=m.substeps,
+                    intersample=lc.cfg.data.intersample, nominal_params=tuple(m.params))
+        if m.input_delay is not None:  # a known dead time (config key model.input_delay): fixed
+            name = fresh_name(model, "input_delay_s")
+            model = replace(model, params={**model.params, name: float(m.input_delay)}, delay=name)
+        return model
 
     @property
     def param_names(self) -> list[str]:
@@ -84,7 +88,11 @@ class Model:
         return replace(self, params=p)
 
     def extend(self, terms: list[Term], new_params: dict[str, float], delay: str | None = None) -> "Model":
-        """A copy with extra terms; ``new_params`` (coefficients, frequencies, delay) become free."""
+        """A copy with extra terms; ``new_params`` (coefficients, frequencies, delay) become free. A new
+        name that is already a nominal (user) parameter is a programming error: use :func:`fresh_name`."""
+        clash = [k for k in new_params if k in self.nominal_params]
+        if clash:
+            raise ValueError(f"generated parameter {clash[0]!r} would overwrite the model's own parameter")
         p = dict(self.params)
         p.update(new_params)
         return replace(self, params=p, free=self.free + tuple(k for k in new_params if k not in self.free),
@@ -112,6 +120,16 @@ class Model:
                     txt += f" + {t.coef}*{t.label}"
             out[s] = txt
         return out
+
+
+def fresh_name(model: "Model", base: str) -> str:
+    """``base``, or ``base_2``, ``base_3``... : the first that is not a nominal parameter, state, input or
+    declared output of the model (extension parameters of the model itself may be reused by name)."""
+    taken = set(model.nominal_params) | set(model.states) | set(model.inputs) | set(model.output_exprs)
+    name, k = base, 2
+    while name in taken:
+        name, k = f"{base}_{k}", k + 1
+    return name
 
 
 def term_values(kind: str, z: np.ndarray | None, t: np.ndarray, power: int = 1, freq: float = 0.0) -> np.ndarray:

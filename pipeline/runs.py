@@ -31,6 +31,7 @@ from .errors import SimulationError
 from .data import Record, Split, apply_prefilters, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .fit import FitResult, Problem, equation_error_start
+from .extended import extended_config
 from .model import Model
 
 SCHEMA = "sysid-summary/1"
@@ -57,7 +58,8 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
                            "fit_percent": fit_percent(prob.Y[prob.split.est_slice()],
                                                       fit.Yhat[prob.split.est_slice()])},
             "validation": {"rmse_sim": rmse(r), "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl])},
-            "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success}
+            "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
+            "identifiability": fit.identifiability.record() if fit.identifiability else None}
 
 
 def families_of(lc: LoadedConfig) -> list[str]:
@@ -124,12 +126,9 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "diagnosis": {
             "verdict": "discrepancy" if diag.findings else "no_significant_discrepancy",
             "findings": diag.findings,
-            "tests": [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
-                       "passed": t.passed, "detail": t.detail, "on": "nominal model, estimation data"}
-                      for t in diag.tests]
-                     + [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
-                         "passed": t.passed, "detail": t.detail, "on": "final model, estimation data (noise)"}
-                        for t in diag.noise_tests],
+            "tests": _test_rows(diag.tests, "nominal model, estimation data"),
+            "final_tests": _test_rows(diag.final_tests, "final model, estimation data")
+                           + _test_rows(diag.noise_tests, "final model, estimation data (noise families)"),
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
         },
@@ -138,6 +137,11 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "notes": {"rmse_sim": "free-run simulation error (not one-step prediction)",
                   "cv_rmse_sim": "blocked k-fold CV is not computed yet (null)"},
     }
+
+
+def _test_rows(tests, on: str) -> list[dict]:
+    return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
+             "passed": t.passed, "detail": t.detail, "on": on} for t in tests]
 
 
 def _git_info() -> dict:
@@ -179,6 +183,9 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
                   "final_equations": dict(ctx.diag.final.model.describe_equations())}
         (tmp / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
         (tmp / "config.resolved.yaml").write_text(yaml.safe_dump(ctx.lc.canonical(), sort_keys=False))
+        ext = extended_config(ctx.lc.canonical(), ctx.diag.final.model, ctx.lc.path, ctx.lc.data_path, target)
+        (tmp / "extended.yaml").write_text("# the final model of run " + ctx.run_id + " as a runnable config\n"
+                                           + yaml.safe_dump(ext, sort_keys=False, allow_unicode=True))
         if html:
             from .report import render_report
             (tmp / "report.html").write_text(render_report(ctx), encoding="utf-8")

@@ -1,7 +1,9 @@
 """Free-run simulation of a grey-box model with the measured input.
 
-Fixed-step classical RK4 (``model.substeps`` steps per sample interval). Between samples the input is
-held (``zoh``) or linearly interpolated (``foh``), as MATLAB's InterSample. The right-hand side is
+Fixed-step classical RK4 (``model.substeps`` steps per sample interval) on the record's own time base:
+step k integrates from t[k] to t[k+1] (a jittered record is integrated with its real intervals, not a
+median dt). Between samples the input is held (``zoh``) or linearly interpolated (``foh``), as MATLAB's
+InterSample. The right-hand side is
 generated from the checked expressions as Python source, written to a per-structure module in a cache
 folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate refits run in threads) and
 ``error_model='numpy'`` (a division by zero gives inf/nan, caught as divergence, instead of a check per
@@ -58,7 +60,7 @@ def rhs(xs, uu, t, p, dx, k_eq, k_kind, k_var, k_pow, k_pc, k_pf):
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf, bound, X):
+def simulate(U, T, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf, bound, X):
     n = U.shape[0]
     nx = x0.shape[0]
     nu = U.shape[1]
@@ -72,7 +74,6 @@ def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf
     um = np.empty(nu)
     ub = np.empty(nu)
     du = np.zeros(nu)
-    h = dt / nsub
     for k in range(n):
         for i in range(nx):
             X[k, i] = xs[i]
@@ -81,8 +82,9 @@ def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf
         if foh:
             for i in range(nu):
                 du[i] = U[k + 1, i] - U[k, i]
+        h = (T[k + 1] - T[k]) / nsub
         for s in range(nsub):
-            t = t0 + k * dt + s * h
+            t = T[k] + s * h
             fa = s / nsub
             fm = (s + 0.5) / nsub
             fb = (s + 1.0) / nsub
@@ -104,6 +106,8 @@ def simulate(U, dt, t0, nsub, foh, p, x0, k_eq, k_kind, k_var, k_pow, k_pc, k_pf
                 xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         for i in range(nx):
             if not (abs(xs[i]) <= bound):
+                for j in range(nx):
+                    X[k + 1, j] = xs[j]
                 return k + 1
     return -1
 '''
@@ -163,6 +167,15 @@ def get_kernel(model: Model):
 class SimResult:
     X: np.ndarray            # (N, nx) states
     diverged_at: int | None  # sample index, or None
+    nonfinite: bool = False  # the state became NaN (an expression undefined there), not merely large
+
+    def reason(self, t: np.ndarray) -> str:
+        k = self.diverged_at
+        when = f"at sample {k} (t = {t[min(k, len(t) - 1)]:.6g} s)"
+        if self.nonfinite:
+            return (f"the simulation produced NaN {when}: an expression is undefined there (e.g. sqrt or log of "
+                    "a negative number, 0/0); check the equations and the parameter values")
+        return f"the model diverged {when}; check the equations' signs and the initial state"
 
 
 def shifted_input(U: np.ndarray, t: np.ndarray, delay: float) -> np.ndarray:
@@ -180,18 +193,31 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     """Simulate from ``t[0]`` with initial state ``x0``; U is (N, nu) sampled with the record."""
     kern = get_kernel(model)
     p = np.array([model.params[k] for k in model.param_names], dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
     if model.delay is not None:
         U = shifted_input(U, t, model.params[model.delay])
     U = np.ascontiguousarray(U, dtype=float)
-    n = len(t)
-    dt = float(t[1] - t[0]) if n > 1 else 1.0
-    X = np.empty((n, len(model.states)))
+    if U.ndim == 1:
+        U = U[:, None]
+    n, nx = len(t), len(model.states)
+    x0 = np.ascontiguousarray(x0, dtype=float)
     eq, kind, var, pw, pc, pf = model.term_table()
-    status = kern(U, dt, float(t[0]), int(model.substeps), model.intersample == "foh", p,
-                  np.asarray(x0, dtype=float), eq, kind, var, pw, pc, pf, float(bound), X)
+    # the kernel indexes without bounds checks: every shape it relies on is checked here
+    if t.ndim != 1 or U.shape[0] != n or x0.shape != (nx,) or U.shape[1] < max(1, len(model.inputs)):
+        raise ValueError(f"simulate_states: inconsistent shapes t {t.shape}, U {U.shape}, x0 {x0.shape} "
+                         f"for {nx} states and {len(model.inputs)} inputs")
+    if n and (len(p) < len(model.nominal_params) or (len(pc) and (pc.max() >= len(p) or pf.max() >= len(p)
+                                                                  or var.max() >= nx or eq.max() >= nx))):
+        raise ValueError("simulate_states: term table refers past the parameter or state vectors")
+    X = np.empty((n, nx))
+    if n == 0:
+        return SimResult(X, None)
+    status = kern(U, t, int(model.substeps), model.intersample == "foh", p, x0, eq, kind, var, pw, pc, pf,
+                  float(bound), X)
     if status >= 0:
+        nonfinite = bool(np.any(np.isnan(X[status])))
         X[status:] = np.nan
-        return SimResult(X, int(status))
+        return SimResult(X, int(status), nonfinite)
     return SimResult(X, None)
 
 
@@ -220,7 +246,5 @@ def simulate_outputs(model: Model, t, U, x0, names, *, bound=1e12, strict=True) 
     """Free-run simulated outputs; with ``strict`` a divergence raises SimulationError."""
     res = simulate_states(model, t, U, x0, bound=bound)
     if res.diverged_at is not None and strict:
-        k = res.diverged_at
-        raise SimulationError(f"the model diverged at sample {k} (t = {t[min(k, len(t) - 1)]:.6g} s) with "
-                              f"parameters {model.params}; check the equations' signs and the initial state")
+        raise SimulationError(res.reason(np.asarray(t, float)) + f" (parameters {model.params})")
     return outputs(model, t, U, res.X, names)

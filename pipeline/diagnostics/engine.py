@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import criteria
-from ..fit import FitResult, Problem, fit_output_error, simulate_until
+from ..fit import FitResult, Problem, fit_output_error, simulate_until, states_full
 from ..model import Model, rhs_vectorized, term_values
 from ..simulate import simulate_states
 from . import stats
 from ..config import NOISE_FAMILIES
+from ..errors import InputError
 from .families import REGISTRY, Hypothesis, Structure, amplitude_phase
 from .noise import diagnose_noise
 
@@ -57,6 +58,7 @@ class Diagnosis:
     history: list[dict]          # every hypothesis tested, per iteration (for the report)
     fits: list[FitResult]        # nominal, then each accepted extension
     noise_tests: list[stats.TestResult] = field(default_factory=list)
+    final_tests: list[stats.TestResult] = field(default_factory=list)   # residual tests of the final model
 
 
 def _log(msg: str) -> None:
@@ -146,8 +148,9 @@ class Diagnoser:
 
     def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
         if hyp.family == "input_delay":
-            d = (values or {}).get("input_delay_s", 0.0)
-            return fit.model.extend([], {"input_delay_s": d}, delay="input_delay_s")
+            name = hyp.coefs[0]
+            d = (values or {}).get(name, 0.0)
+            return fit.model.extend([], {name: d}, delay=name)
         params = {c: 0.0 for c in hyp.coefs}
         params.update(hyp.extra_params)
         params.update(values or {})
@@ -173,14 +176,14 @@ class Diagnoser:
         hyp = cand.hyp
         try:
             if hyp.family == "input_delay":
-                return self._fit_delay(fit)
+                return self._fit_delay(fit, hyp.coefs[0])
             start = {c: float(b) for c, b in zip(hyp.coefs, cand.wald.beta)}
             return fit_output_error(self.hyp_model(fit, hyp, start), self.prob)
-        except Exception as exc:  # a candidate that cannot be fitted is rejected, not fatal
+        except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:  # rejected, not fatal
             cand.reason = f"refit failed: {exc}"
             return None
 
-    def _fit_delay(self, fit: FitResult) -> FitResult | None:
+    def _fit_delay(self, fit: FitResult, name: str) -> FitResult | None:
         """Profile search: weighted SSE over integer delays 0..max with the current parameters, a
         parabola through the best one and its neighbours for the fractional part, then one refit of
         all free parameters at that delay. None when the best delay is below a quarter sample."""
@@ -188,7 +191,7 @@ class Diagnoser:
         kmax = max(1, min(int(round(self.max_delay / self.dt)), len(y) // 4))
         sse = []
         for k in range(kmax + 1):
-            m = fit.model.extend([], {"input_delay_s": k * self.dt}, delay="input_delay_s")
+            m = fit.model.extend([], {name: k * self.dt}, delay=name)
             Yh = self._sim_est(m, fit.x0)
             sse.append(np.inf if Yh is None else float(np.sum(((y - Yh) * self.w) ** 2)))
         k0 = int(np.argmin(sse))
@@ -200,13 +203,13 @@ class Diagnoser:
         d = (k0 + frac) * self.dt
         if d < 0.25 * self.dt:
             return None
-        m = fit.model.extend([], {"input_delay_s": d}, delay="input_delay_s")
+        m = fit.model.extend([], {name: d}, delay=name)
         return fit_output_error(m, self.prob)
 
     # -- one iteration -----------------------------------------------------------------------------
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> list[Candidate]:
         st = Structure.of(fit.model)
-        X = simulate_states(fit.model, self.prob.t, self.prob.U, fit.x0, bound=self.prob.bound).X
+        X = states_full(fit.model, self.prob, fit.x0)
         out = []
         for fam in self.families:
             if fam not in REGISTRY:
@@ -348,7 +351,8 @@ class Diagnoser:
             _log("noise families on the final model: " + ", ".join(noise_fams))
             nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed, n_boot=self.n_boot)
             findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
-        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests)
+        final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
+        return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests)
 
     def finding(self, c: Candidate) -> dict:
         h, fit = c.hyp, c.fit
@@ -360,7 +364,7 @@ class Diagnoser:
                 f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
                 f"{100 * g['ci95'][1]:.1f} %) and BIC by {-c.delta_bic:.1f}")
         if h.family == "input_delay":
-            d = float(fit.model.params["input_delay_s"])
+            d = float(fit.model.params[fit.model.delay])
             f.update(delay_s=d, delay_samples=d / self.dt)
             desc = f"The input acts with a dead time of {d:.4g} s ({d / self.dt:.2f} samples); delaying it {gtxt}."
         elif h.family == "output_offset":

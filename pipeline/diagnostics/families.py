@@ -7,11 +7,12 @@ Adding a family: one class here with ``id`` and ``hypotheses(ctx)``, and one lin
 
 from __future__ import annotations
 
+import ast
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model import Model, Term
+from ..model import Model, Term, fresh_name
 
 
 @dataclass
@@ -24,8 +25,9 @@ class Structure:
 
     @classmethod
     def of(cls, model: Model) -> "Structure":
-        kin = {s: model.equations[s].text.strip() for s in model.states
-               if model.equations[s].text.strip() in model.states}
+        """From the parsed equations, not their text: ``x' = (v)`` and ``x' = v`` are the same."""
+        kin = {s: model.equations[s].tree.id for s in model.states
+               if isinstance(model.equations[s].tree, ast.Name) and model.equations[s].tree.id in model.states}
         dyn = [s for s in model.states if s not in kin]
         if not kin:
             return cls(dyn or list(model.states), list(model.states), list(model.states))
@@ -44,8 +46,10 @@ class Hypothesis:
     output: str | None = None
 
 
-def _pname(*parts: str) -> str:
-    return "_".join(p.replace("*", "").replace("(", "").replace(")", "") for p in parts)
+def _pname(model: Model, *parts: str) -> str:
+    """A generated parameter name that no parameter of the model (the user's included) already has."""
+    base = "_".join(p.replace("*", "").replace("(", "").replace(")", "") for p in parts)
+    return fresh_name(model, base)
 
 
 def _present(model: Model, kind: str, target: str, var: str | None = None) -> bool:
@@ -64,7 +68,7 @@ class _StateTermFamily:
             for var in getattr(st, self.role):
                 if _present(model, self.kind, eq, var):
                     continue
-                c = _pname(self.id, eq, var)
+                c = _pname(model, self.id, eq, var)
                 term = Term(self.id, self.kind, eq, c, var=var, power=self.power)
                 out.append(Hypothesis(self.id, f"{self.id}:{eq}:{var}", [term], [c], equation=eq,
                                       term=term.label))
@@ -105,7 +109,7 @@ class Offset:
         for eq in st.dynamic_eqs:
             if _present(model, "const", eq):
                 continue
-            c = _pname("offset", eq)
+            c = _pname(model, "offset", eq)
             out.append(Hypothesis(self.id, f"offset:{eq}", [Term(self.id, "const", eq, c)], [c], equation=eq,
                                   term="1"))
         return out
@@ -119,7 +123,7 @@ class OutputOffset:
         for y in outputs:
             if _present(model, "out_const", y):
                 continue
-            c = _pname("output_offset", y)
+            c = _pname(model, "output_offset", y)
             out.append(Hypothesis(self.id, f"output_offset:{y}", [Term(self.id, "out_const", y, c)], [c],
                                   output=y))
         return out
@@ -136,7 +140,8 @@ class PeriodicDisturbance:
         k = sum(1 for t in model.terms if t.kind == "sin")
         out = []
         for eq in st.dynamic_eqs:
-            a, b, f = _pname("periodic", eq, f"sin{k}"), _pname("periodic", eq, f"cos{k}"), _pname("freq", eq, str(k))
+            a, b, f = (_pname(model, "periodic", eq, f"sin{k}"), _pname(model, "periodic", eq, f"cos{k}"),
+                       _pname(model, "freq", eq, str(k)))
             terms = [Term(self.id, "sin", eq, a, freq=f), Term(self.id, "cos", eq, b, freq=f)]
             out.append(Hypothesis(self.id, f"periodic:{eq}", terms, [a, b], extra_params={f: float(freq_hz)},
                                   equation=eq, term=f"sin/cos(2*pi*{freq_hz:.4g}*t)"))
@@ -151,7 +156,7 @@ class InputDelay:
     def hypotheses(self, model: Model, st: Structure, **_) -> list[Hypothesis]:
         if model.delay is not None or not model.inputs:
             return []
-        return [Hypothesis(self.id, "input_delay", [], ["input_delay_s"])]
+        return [Hypothesis(self.id, "input_delay", [], [fresh_name(model, "input_delay_s")])]
 
 
 REGISTRY = {f.id: f for f in (Offset(), OutputOffset(), CubicStiffness(), QuadraticDamping(),

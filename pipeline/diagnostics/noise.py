@@ -43,6 +43,7 @@ import numpy as np
 from scipy import optimize, signal
 from scipy import stats as sps
 
+from ..errors import EstimationError, InputError
 from ..fit import FitResult, Problem, fit_output_error, simulate_full, simulate_until
 from .stats import TestResult, holm, ljung_box
 
@@ -164,14 +165,19 @@ def nll_gauss(r, s2):
     return 0.5 * (LOG2PI + np.log(s2) + r ** 2 / s2)
 
 
-def block_ci(d: np.ndarray, rng: np.random.Generator, n_boot: int) -> list[float]:
-    """95 % moving-block bootstrap interval of mean(d), blocks of ⌈√n⌉ (Künsch 1989)."""
+def block_ci(d: np.ndarray, rng: np.random.Generator, n_boot: int, base: np.ndarray | None = None) -> list[float]:
+    """95 % moving-block bootstrap interval (blocks of ⌈√n⌉, Künsch 1989) of mean(d), or, with ``base``,
+    of the relative drop mean(d)/|mean(base)| with both means taken over the same resampled blocks, so
+    the interval is of the very quantity reported as ``relative``."""
     n = len(d)
     L = int(math.ceil(math.sqrt(n)))
     nb = int(math.ceil(n / L))
     c = np.concatenate([[0.0], np.cumsum(d)])
     st = rng.integers(0, n - L + 1, size=(n_boot, nb))
     m = (c[st + L] - c[st]).sum(axis=1) / (nb * L)
+    if base is not None:
+        cb = np.concatenate([[0.0], np.cumsum(base)])
+        m = m / np.abs((cb[st + L] - cb[st]).sum(axis=1) / (nb * L))
     return [float(x) for x in np.percentile(m, [2.5, 97.5])]
 
 
@@ -220,7 +226,7 @@ def _colored(S: _Sim, e: np.ndarray, a0: np.ndarray, dt: float):
     of the simulation) and ∂ε_k/∂a_i = −w r_{k−i} (exact)."""
     w, p, k, n = float(S.prob.weights[0]), len(a0), len(S.fit.theta), len(e)
     if p == 0:
-        raise ValueError("BIC chose a white residual (AR order 0): no noise filter to fit")
+        raise EstimationError("BIC chose a white residual (AR order 0): no noise filter to fit")
     cache: dict = {}
 
     def r_of(th):
@@ -337,7 +343,9 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
         try:
             th, cov, nll, k_extra, key, desc = fix(S, e, a_pre if fam == "colored_noise" else yhat, dt)
             Yh = S.full(th)
-        except Exception:                        # a fix that cannot be estimated is no finding
+        except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:  # cannot be estimated: no finding
+            tests.append(TestResult(f"{fam}_fix", float("nan"), float("nan"), None, False,
+                                    f"not estimated: {exc}"))
             continue
         na = nll(prob.Y[vs, 0] - Yh[vs, 0], Yh[vs, 0])
         nb = nll_gauss(r0_val[len(r0_val) - len(na):], s2_0)
@@ -347,16 +355,18 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
         d = nb - na
         g = {"metric": "validation_nll", "before": float(nb.mean()), "after": float(na.mean()),
              "relative": float(d.mean() / abs(nb.mean())),
-             "ci95": block_ci(d, np.random.default_rng([seed, 99]), n_boot),
+             "ci95": block_ci(d, np.random.default_rng([seed, 99]), n_boot, base=nb),
+             "absolute": float(d.mean()),
+             "absolute_ci95": block_ci(d, np.random.default_rng([seed, 99]), n_boot),
              "bootstrap": {"method": "moving block", "block": int(math.ceil(math.sqrt(len(d)))), "n": n_boot}}
-        if not (g["ci95"][0] > 0 and dbic < 0):
+        if not (g["absolute_ci95"][0] > 0 and dbic < 0):
             continue
         std = np.sqrt(np.clip(np.diag(cov), 0, None))
         ev = [{"test": test.name, "statistic": test.statistic, "p_value": test.p_value}]
         f = {"family": fam, **key, "evidence": ev, "gain": g, "delta_bic": dbic,
              "description": desc + f" lowers the validation NLL per sample from {g['before']:.4g} to "
-                                   f"{g['after']:.4g} (95 % CI of the drop {g['ci95'][0]:.3g} to "
-                                   f"{g['ci95'][1]:.3g}).",
+                                   f"{g['after']:.4g} (a drop of {g['absolute']:.3g}, 95 % CI "
+                                   f"{g['absolute_ci95'][0]:.3g} to {g['absolute_ci95'][1]:.3g}).",
              "params": dict(zip(fit.names, map(float, th))),
              "params_std": dict(zip(fit.names, map(float, std))),
              "interval_width": {"before": float(np.mean(3.92 * fit.std)), "after": float(np.mean(3.92 * std)),

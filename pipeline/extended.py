@@ -1,0 +1,61 @@
+"""``extended.yaml``: the final model of a run written back as a runnable config (contract §4).
+
+The config is the run's own config with the model replaced by the final (extended) model: extension
+terms written into the equations in the expression language (``pi`` included), their coefficients as
+parameters (free, starting at the fitted values, so a rerun converges to the same numbers), the
+nominal parameters at their fitted values, a sensor offset as a declared output ``<y>_measured = y + c``
+that the measured column then maps to, and a found dead time as ``model.input_delay`` (fixed).
+Noise-model findings change how the model is fitted, not the model, and are not written here.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .model import Model
+
+
+def extended_config(canonical: dict, model: Model, config_path: Path, data_path: Path, target: Path) -> dict:
+    """``canonical``: the run's validated config as a dict; ``model``: the final fitted model."""
+    cfg = {k: v for k, v in canonical.items() if k not in ("structures", "estimators")}
+    cfg["name"] = f"{canonical['name']}-extended"
+    m = dict(canonical["model"])
+    data = dict(canonical["data"])
+    eqs = model.describe_equations()
+    m["equations"] = {s: eqs[s] for s in model.states}
+    params = {k: float(v) for k, v in model.params.items() if k != model.delay}
+    m["params"] = params
+    m["free"] = list(dict.fromkeys([k for k in model.free if k != model.delay]))
+    if model.delay is not None:
+        m["input_delay"] = float(model.params[model.delay])
+    outs = dict(m.get("outputs") or {})
+    offsets = [t for t in model.terms if t.kind == "out_const"]
+    if offsets:
+        omap = data["outputs"] if isinstance(data["outputs"], dict) else {c: c for c in data["outputs"]}
+        for term in offsets:
+            base = outs.get(term.target, term.target)
+            name = f"{term.target}_measured"
+            outs[name] = f"{base} + {term.coef}"
+            omap = {col: (name if tgt == term.target else tgt) for col, tgt in omap.items()}
+        data["outputs"] = omap
+    if outs:
+        m["outputs"] = outs
+    cfg["model"] = m
+    try:
+        rel = os.path.relpath(data_path.resolve(), target.resolve())
+    except ValueError:  # another drive (Windows)
+        rel = str(data_path.resolve())
+    data["path"] = rel
+    cfg["data"] = data
+    return _drop_empty(cfg)
+
+
+def _drop_empty(x):
+    """Without keys whose value is null or an empty list/mapping (their defaults), for a readable file."""
+    if isinstance(x, dict):
+        out = {k: _drop_empty(v) for k, v in x.items()}
+        return {k: v for k, v in out.items() if v is not None and v != {} and v != []}
+    if isinstance(x, list):
+        return [_drop_empty(v) for v in x]
+    return x
