@@ -7,7 +7,7 @@ CONFIG ?= configs/demo.yaml
 OUT    ?=
 PYTEST_ARGS ?=
 
-.PHONY: install report diagnose test bench clean
+.PHONY: install report diagnose test bench bench-diagnosis clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -36,6 +36,11 @@ $(BENCH_VENV)/.installed: pyproject.toml
 
 bench: $(BENCH_VENV)/.installed
 	@$(BENCH_VENV)/bin/python -m pipeline.bench
+
+# the diagnosis on independent records (pipeline.bench.diagnosis); QUICK=1 for a small grid,
+# SEEDS=test for the held-out seeds; writes its own section of BENCHMARKS.md
+bench-diagnosis: $(STAMP)
+	@$(BIN)/python -m pipeline.bench.diagnosis $(if $(QUICK),--quick,) $(if $(SEEDS),--seeds $(SEEDS),)
 
 clean:
 	rm -rf $(VENV) $(BENCH_VENV) build *.egg-info .pytest_cache

@@ -18,7 +18,9 @@ import sys
 import traceback
 
 # modules that add subcommands (each one file, one line here)
-COMMAND_MODULES: list[str] = []
+COMMAND_MODULES: list[str] = [
+    "pipeline.assignment.cli",
+]
 
 
 def _run_command(args: argparse.Namespace) -> int:

@@ -24,19 +24,25 @@ def extended_config(canonical: dict, model: Model, config_path: Path, data_path:
     data = dict(canonical["data"])
     eqs = model.describe_equations()
     m["equations"] = {s: eqs[s] for s in model.states}
+    if model.extra_states:  # e.g. an actuator lag: a state of its own, from its initial value
+        m["states"] = list(model.states)
+        init = m.get("initial", 0.0)
+        init = dict(init) if isinstance(init, dict) else {s: init for s in model.nominal_states}
+        init.update({s: model.initial[s] for s in model.extra_states})
+        m["initial"] = init
     params = {k: float(v) for k, v in model.params.items() if k != model.delay}
     m["params"] = params
     m["free"] = list(dict.fromkeys([k for k in model.free if k != model.delay]))
     if model.delay is not None:
         m["input_delay"] = float(model.params[model.delay])
     outs = dict(m.get("outputs") or {})
-    offsets = [t for t in model.terms if t.kind == "out_const"]
+    offsets = [t for t in model.terms if t.is_output]
     if offsets:
         omap = data["outputs"] if isinstance(data["outputs"], dict) else {c: c for c in data["outputs"]}
         for term in offsets:
             base = outs.get(term.target, term.target)
             name = f"{term.target}_measured"
-            outs[name] = f"{base} + {term.coef}"
+            outs[name] = f"{base} + {term.coef}" if term.label == "1" else f"{base} + {term.coef}*({term.label})"
             omap = {col: (name if tgt == term.target else tgt) for col, tgt in omap.items()}
         data["outputs"] = omap
     if outs:

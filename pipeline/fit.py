@@ -239,7 +239,7 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.nd
 
 def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None:
     """LS on ẋ − f(x, u; θ) when every state is measured (fast start for the output-error fit)."""
-    if not all(s in prob.out_names for s in model.states) or not model.free:
+    if model.extra_states or not all(s in prob.out_names for s in model.states) or not model.free:
         return None
     sl = prob.split.est_slice()
     X = np.column_stack([prob.Y[sl, prob.out_names.index(s)] for s in model.states])

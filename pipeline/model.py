@@ -1,48 +1,84 @@
-"""Grey-box model: the nominal ODE from the config plus additive extension terms.
+"""Grey-box model: the nominal ODE from the config plus extensions written in the expression language.
 
-    d(state)/dt = nominal(state, u, t; p) + Σ_j c_j · term_j(state, t)
+    d(state)/dt = nominal(state, ũ, t; p̃) + Σ_j c_j · term_j(states, ũ, t; p)
 
-An extension never changes the compiled nominal right-hand side: its terms are rows of a small table
-(kind, equation, variable, coefficient index) that the kernel evaluates (see :mod:`pipeline.simulate`).
-Output-side extensions (``output_offset``) and the input delay act outside the ODE.
+An extension is one of (all written as checked expressions of :mod:`pipeline.expressions`):
+
+* an additive term ``c * expr`` in a state equation (``x**3``, ``sign(v)``, ``sqrt(h)``, ``u**2``, ...), or
+  on a measured output (a sensor offset ``c * 1``);
+* a rewrite of an input, ``ũ = g(u, ...)`` (saturation ``clip(u, -L, L)``, a dead zone
+  ``sign(u)*maximum(abs(u) - w, 0)``, or a new state: ``u → u_a`` with ``u_a' = (u - u_a)/tau``);
+* a rewrite of a parameter, ``p̃ = g(p, t)`` (a jump ``k + dk*step(t - tj)``, a drift ``k*(1 + r*t)``);
+* an extra state with its own equation (an actuator lag);
+* a state limit (the state is clamped to [lo, hi] after every integration step: overflow, end stop).
+
+The nominal right-hand side is compiled once per structure; extensions are evaluated inside the same
+kernel by a small stack machine (see :mod:`pipeline.simulate`), so testing and refitting a hypothesis
+never recompiles. The input delay acts on the sampled input before the kernel.
 """
 
 from __future__ import annotations
 
+import ast
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .config import LoadedConfig
-from .expressions import Expr
+from .expressions import Expr, parse
 
-# kernel codes of additive term kinds
-KIND_CODES = {"const": 0, "pow": 1, "sign": 2, "absprod": 3, "sin": 4, "cos": 5}
+_LEGACY = {"const": "1", "out_const": "1", "pow": "{var}**{power}", "sign": "sign({var})",
+           "absprod": "{var}*abs({var})", "sin": "sin(2*pi*{freq}*t)", "cos": "cos(2*pi*{freq}*t)"}
 
 
 @dataclass(frozen=True)
 class Term:
-    """One additive extension term ``coef * term`` in a state equation (or an output offset)."""
+    """One additive term ``coef * expr`` in a state equation, or on a measured output (``out_const``
+    kinds and ``on="output"``). ``kind`` names a shorthand (const, pow, sign, absprod, sin, cos,
+    out_const) or is ``expr`` with the expression text in ``text``."""
 
     family: str
-    kind: str                 # const | pow | sign | absprod | sin | cos | out_const
-    target: str               # state equation, or measured output name for out_const
+    kind: str
+    target: str               # state equation, or measured output name
     coef: str                 # parameter name of the coefficient
-    var: str | None = None    # state the term depends on
+    var: str | None = None    # state of the shorthand kinds
     power: int = 1
     freq: str | None = None   # parameter name of the frequency (Hz) for sin/cos
+    text: str | None = None   # the expression, for kind "expr"
+    on: str = "state"         # "state" or "output"
+
+    def __post_init__(self):
+        if self.kind == "out_const":
+            object.__setattr__(self, "on", "output")
 
     @property
     def label(self) -> str:
-        if self.kind in ("const", "out_const"):
-            return "1"
-        if self.kind == "pow":
-            return f"{self.var}**{self.power}"
-        if self.kind == "sign":
-            return f"sign({self.var})"
-        if self.kind == "absprod":
-            return f"{self.var}*abs({self.var})"
-        return f"{self.kind}(2*pi*{self.freq}*t)"
+        if self.kind == "expr":
+            return str(self.text)
+        return _LEGACY[self.kind].format(var=self.var, power=self.power, freq=self.freq)
+
+    @property
+    def is_output(self) -> bool:
+        return self.on == "output"
+
+
+@dataclass(frozen=True)
+class Rewrite:
+    """``target`` (an input or a parameter) is replaced by ``text`` wherever the nominal model uses it."""
+
+    family: str
+    target: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Limit:
+    """State ``state`` clamped to [lo, hi] (parameter names, or None for no bound on that side)."""
+
+    family: str
+    state: str
+    lo: str | None = None
+    hi: str | None = None
 
 
 @dataclass(frozen=True)
@@ -61,6 +97,26 @@ class Model:
     terms: tuple[Term, ...] = ()
     delay: str | None = None            # parameter name of the input delay (seconds)
     nominal_params: tuple[str, ...] = field(default=())
+    input_rewrites: tuple[Rewrite, ...] = ()
+    param_rewrites: tuple[Rewrite, ...] = ()
+    limits: tuple[Limit, ...] = ()
+    nominal_states: tuple[str, ...] = ()   # compiled states; extra states (extensions) follow them
+
+    def __post_init__(self):
+        if not self.nominal_states:
+            object.__setattr__(self, "nominal_states", tuple(self.states))
+
+    @property
+    def extra_states(self) -> tuple[str, ...]:
+        return self.states[len(self.nominal_states):]
+
+    def names(self) -> set[str]:
+        """Names an extension expression may use."""
+        return set(self.states) | set(self.inputs) | set(self.params) | {"t"}
+
+    def expr(self, text: str, where: str = "extension") -> Expr:
+        """Parse an extension's expression against this model's names (cached per text)."""
+        return _parse_cached(text, frozenset(self.names()), where)
 
     @classmethod
     def from_config(cls, lc: LoadedConfig) -> "Model":
@@ -87,39 +143,73 @@ class Model:
         p.update({k: float(v) for k, v in values.items()})
         return replace(self, params=p)
 
-    def extend(self, terms: list[Term], new_params: dict[str, float], delay: str | None = None) -> "Model":
-        """A copy with extra terms; ``new_params`` (coefficients, frequencies, delay) become free. A new
-        name that is already a nominal (user) parameter is a programming error: use :func:`fresh_name`."""
+    def extend(self, terms: list[Term], new_params: dict[str, float], delay: str | None = None, *,
+               input_rewrites: tuple = (), param_rewrites: tuple = (), limits: tuple = (),
+               extra_states: dict[str, tuple[str, float]] | None = None) -> "Model":
+        """A copy with extensions; ``new_params`` (coefficients, frequencies, limits, delay...) become
+        free. ``extra_states``: name -> (equation text, initial value). A new name that is already a
+        nominal (user) parameter is a programming error: use :func:`fresh_name`."""
         clash = [k for k in new_params if k in self.nominal_params]
         if clash:
             raise ValueError(f"generated parameter {clash[0]!r} would overwrite the model's own parameter")
         p = dict(self.params)
         p.update(new_params)
+        states, eqs, init = self.states, dict(self.equations), dict(self.initial)
+        if extra_states:
+            names = set(self.names()) | set(extra_states) | set(new_params)
+            for name, (text, x0) in extra_states.items():
+                eqs[name] = _parse_cached(text, frozenset(names), f"extension state {name}")
+                init[name] = float(x0)
+            states = states + tuple(extra_states)
         return replace(self, params=p, free=self.free + tuple(k for k in new_params if k not in self.free),
-                       terms=self.terms + tuple(terms), delay=delay or self.delay)
+                       terms=self.terms + tuple(terms), delay=delay or self.delay, states=states,
+                       equations=eqs, initial=init, input_rewrites=self.input_rewrites + tuple(input_rewrites),
+                       param_rewrites=self.param_rewrites + tuple(param_rewrites),
+                       limits=self.limits + tuple(limits))
 
-    def term_table(self) -> tuple[np.ndarray, ...]:
-        """Arrays (eq, kind, var, power, coef_idx, freq_idx) for the kernel (out_const excluded)."""
-        names = self.param_names
-        rows = [t for t in self.terms if t.kind != "out_const"]
-        eq = np.array([self.states.index(t.target) for t in rows], dtype=np.int64)
-        kind = np.array([KIND_CODES[t.kind] for t in rows], dtype=np.int64)
-        var = np.array([self.states.index(t.var) if t.var else 0 for t in rows], dtype=np.int64)
-        pw = np.array([t.power for t in rows], dtype=np.int64)
-        pc = np.array([names.index(t.coef) for t in rows], dtype=np.int64)
-        pf = np.array([names.index(t.freq) if t.freq else -1 for t in rows], dtype=np.int64)
-        return eq, kind, var, pw, pc, pf
+    def term_expr(self, term: Term) -> Expr:
+        return self.expr(term.label, f"term {term.coef}")
 
     def describe_equations(self) -> dict[str, str]:
-        """Readable equations of the (extended) model, e.g. for the report."""
+        """The (extended) model's equations written out in the expression language, with input and
+        parameter rewrites substituted, so each line can be pasted back into a config."""
+        subst = {rw.target: ast.parse(f"({rw.text})", mode="eval").body for rw in self.input_rewrites}
+        psub = {rw.target: ast.parse(f"({rw.text})", mode="eval").body for rw in self.param_rewrites}
         out = {}
         for s in self.states:
-            txt = self.equations[s].text
+            tree = self.equations[s].tree
+            if s in self.nominal_states:
+                tree = _substitute(tree, {**subst, **psub})
+            txt = ast.unparse(tree)
             for t in self.terms:
-                if t.kind != "out_const" and t.target == s:
-                    txt += f" + {t.coef}*{t.label}"
+                if not t.is_output and t.target == s:
+                    txt += f" + {t.coef}*{_wrap(t.label)}"
             out[s] = txt
         return out
+
+
+def _wrap(text: str) -> str:
+    node = ast.parse(text, mode="eval").body
+    return text if isinstance(node, (ast.Name, ast.Constant, ast.Call)) or (
+        isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Mult, ast.Pow))) else f"({text})"
+
+
+def _substitute(tree: ast.expr, repl: dict[str, ast.expr]) -> ast.expr:
+    class T(ast.NodeTransformer):
+        def visit_Name(self, node):
+            return repl.get(node.id, node)
+    import copy
+    return T().visit(copy.deepcopy(tree))
+
+
+_PARSED: dict = {}
+
+
+def _parse_cached(text: str, names: frozenset, where: str) -> Expr:
+    key = (text, names)
+    if key not in _PARSED:
+        _PARSED[key] = parse(text, set(names), where=where)
+    return _PARSED[key]
 
 
 def fresh_name(model: "Model", base: str) -> str:
@@ -133,8 +223,8 @@ def fresh_name(model: "Model", base: str) -> str:
 
 
 def term_values(kind: str, z: np.ndarray | None, t: np.ndarray, power: int = 1, freq: float = 0.0) -> np.ndarray:
-    """Values of one extension term (as the kernel evaluates it) on arrays."""
-    if kind == "const":
+    """Values of one shorthand extension term on arrays (kept for the synthetic generator's helpers)."""
+    if kind in ("const", "out_const"):
         return np.ones_like(t, dtype=float)
     if kind == "pow":
         return z ** power
@@ -149,18 +239,50 @@ def term_values(kind: str, z: np.ndarray | None, t: np.ndarray, power: int = 1, 
     raise ValueError(kind)
 
 
-def rhs_vectorized(model: Model, X: np.ndarray, U: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """f(x, u, t; θ) of the (extended) model evaluated row-wise on arrays (N, nx), (N, nu), (N,)."""
+def _env(model: Model, X: np.ndarray, U: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray | float]:
+    """Values of every name on arrays: states, effective inputs and parameters (rewrites applied), t."""
     from .expressions import vectorize
-    args = list(model.states) + list(model.inputs) + list(model.nominal_params) + ["t"]
-    vals = [X[:, i] for i in range(X.shape[1])] + [U[:, j] for j in range(len(model.inputs))]
-    vals += [model.params[k] for k in model.nominal_params] + [t]
-    out = np.column_stack([np.broadcast_to(np.asarray(vectorize(model.equations[s], args)(*vals), float), t.shape)
-                           for s in model.states])
+    env: dict = {s: X[:, i] for i, s in enumerate(model.states) if i < X.shape[1]}
+    raw_u = {u: U[:, j] for j, u in enumerate(model.inputs)}
+    env.update(raw_u)
+    env.update(model.params)
+    env["t"] = t
+
+    def ev(text, scope):
+        e = model.expr(text)
+        names = sorted(e.names)
+        return np.broadcast_to(np.asarray(vectorize(e, names)(*[scope[n] for n in names]), float), t.shape)
+
+    raw = dict(env)
+    for rw in model.param_rewrites:
+        env[rw.target] = ev(rw.text, raw)
+    for rw in model.input_rewrites:
+        env[rw.target] = ev(rw.text, raw)
+    return env
+
+
+def term_on(model: Model, term: Term, X: np.ndarray, U: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Values of ``term``'s expression (without its coefficient) along states X, inputs U, time t."""
+    from .expressions import vectorize
+    env = _env(model, X, U, t)
+    e = model.term_expr(term)
+    names = sorted(e.names)
+    return np.broadcast_to(np.asarray(vectorize(e, names)(*[env[n] for n in names]), float), t.shape)
+
+
+def rhs_vectorized(model: Model, X: np.ndarray, U: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """f(x, u, t; θ) of the (extended) model evaluated row-wise on arrays (N, nx), (N, nu), (N,)
+    (the nominal states' equations; extra states need their own, unmeasured, values in X)."""
+    from .expressions import vectorize
+    env = _env(model, X, U, t)
+    out = []
+    for s in model.states[:X.shape[1]]:
+        e = model.equations[s]
+        names = sorted(e.names)
+        out.append(np.broadcast_to(np.asarray(vectorize(e, names)(*[env[n] for n in names]), float), t.shape))
+    out = np.column_stack(out).astype(float)
     for term in model.terms:
-        if term.kind == "out_const":
+        if term.is_output or term.target not in model.states[:X.shape[1]]:
             continue
-        z = X[:, model.states.index(term.var)] if term.var else None
-        fz = model.params[term.freq] if term.freq else 0.0
-        out[:, model.states.index(term.target)] += model.params[term.coef] * term_values(term.kind, z, t, term.power, fz)
+        out[:, model.states.index(term.target)] += model.params[term.coef] * term_on(model, term, X, U, t)
     return out

@@ -1,8 +1,11 @@
 """One run: config + record → diagnosis → run folder ``reports/<run-id>/``.
 
 The run id is ``<name>-<8 hex>`` from the hashes of the canonical config and the data file, not the
-clock, so a rerun reproduces it. Everything is written into a hidden temporary folder beside the
-target and renamed at the end: a crashed run never looks complete. ``summary.json`` (contract §3)
+clock, so a rerun reproduces it. ``--out`` is checked before the analysis (:func:`runfolder.check_target`:
+a user's files, the data's folder or the current folder are refused, exit 2); everything is written into
+a hidden temporary folder beside the target, marked complete last and published by renames
+(:mod:`pipeline.runfolder`): a crashed run never looks complete and never replaces anything but an
+empty folder or an earlier complete run. ``summary.json`` (contract §3)
 holds no times or paths and its floats are rounded to 10 significant digits, so two runs of the same
 config on the same data are byte-identical.
 """
@@ -16,7 +19,6 @@ import platform
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,11 +30,12 @@ from .jsonutil import clean as _clean
 from .jsonutil import dumps
 from .config import FAMILIES_V1, NOISE_FAMILIES, LoadedConfig, load_config
 from .errors import SimulationError
-from .data import Record, Split, apply_prefilters, load_record, make_split, remove_means
+from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .fit import FitResult, Problem, equation_error_start
 from .extended import extended_config
 from .model import Model
+from .runfolder import check_target, finalize, kill_point, make_temp, publish
 
 SCHEMA = "sysid-summary/1"
 
@@ -67,6 +70,32 @@ def families_of(lc: LoadedConfig) -> list[str]:
     return list(FAMILIES_V1) if fam == "all" else [f for f in fam if f in FAMILIES_V1]
 
 
+def run_id_of(lc: LoadedConfig, data_sha256: str) -> str:
+    """``<name>-<8 hex>`` from the canonical config hash and the data file's hash."""
+    return f"{lc.cfg.name}-{hashlib.sha256((lc.sha256() + data_sha256).encode()).hexdigest()[:8]}"
+
+
+def input_paths(lc: LoadedConfig) -> list[Path]:
+    """The files a run reads: the config, ``data.path`` and any other ``path`` under ``data`` (e.g. a
+    separate validation record or experiments), relative ones taken from the config's folder."""
+    out = [Path(lc.path), lc.data_path]
+
+    def walk(v):
+        if isinstance(v, dict):
+            for k, x in v.items():
+                if k == "path" and isinstance(x, str):
+                    p = Path(x)
+                    out.append(p if p.is_absolute() else Path(lc.path).parent / p)
+                else:
+                    walk(x)
+        elif isinstance(v, list):
+            for x in v:
+                walk(x)
+
+    walk(lc.cfg.data.model_dump(mode="json"))
+    return list(dict.fromkeys(out))
+
+
 def analyse(lc: LoadedConfig) -> RunContext:
     rec = load_record(lc)
     prefilter_log = (apply_prefilters(rec, lc.cfg.prefilter, str(lc.path), lc.cfg.data.min_samples)
@@ -88,7 +117,7 @@ def analyse(lc: LoadedConfig) -> RunContext:
         from .compare import Comparer
         comparison = Comparer(lc, rec, split, model).run()
     cfg_sha = lc.sha256()
-    run_id = f"{lc.cfg.name}-{hashlib.sha256((cfg_sha + rec.sha256).encode()).hexdigest()[:8]}"
+    run_id = run_id_of(lc, rec.sha256)
     summary = build_summary(lc, rec, prob, diag, run_id, cfg_sha)
     summary["data"]["prefilter"] = prefilter_log
     if comparison is not None:
@@ -168,13 +197,29 @@ def _versions() -> dict:
     return out
 
 
+def default_target(run_id: str) -> Path:
+    return Path("reports") / run_id
+
+
 def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
-    target = Path(out) if out else Path("reports") / ctx.run_id
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    """Write the run folder ``out`` (default ``reports/<run-id>``) and return it as given.
+
+    The target is checked again (:func:`runfolder.check_target`, it may have changed during the
+    analysis), the files are written into a fresh hidden temp folder, the completion marker last, and
+    the folder is published atomically (:func:`runfolder.publish`)."""
+    default = out is None
+    target = Path(out) if out else default_target(ctx.run_id)
+    if default:
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            pass  # check_target names the problem
+    resolved = check_target(target, inputs=input_paths(ctx.lc), default=default)
+    tmp = make_temp(resolved)
     try:
         t0 = time.perf_counter()
         (tmp / "summary.json").write_text(dumps(ctx.summary))
+        kill_point("after_summary_written")
         metrics = {"nominal": ctx.summary["nominal"], "final": ctx.summary["final"],
                    "models": ctx.summary["models"]}
         (tmp / "metrics.json").write_text(dumps(metrics))
@@ -194,9 +239,8 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
                     "git": _git_info(), "versions": _versions(), "platform": platform.platform(),
                     "command": " ".join(sys.argv), "report_seconds": round(time.perf_counter() - t0, 3)}
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(tmp, target)
+        finalize(tmp, ctx.run_id)
+        publish(tmp, resolved)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -204,6 +248,17 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
 
 
 def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = True) -> Path:
+    """Load the config, check ``--out`` (before any analysis), analyse, write the run folder."""
     lc = load_config(config_path)
+    inputs = input_paths(lc)
+    if out is not None:
+        check_target(out, inputs=inputs, default=False)   # "" is refused, not taken as the default
+    else:  # the run id follows from the two hashes: check reports/<run-id> now (the data is read later)
+        try:
+            data_sha = file_sha256(lc.data_path)
+        except OSError:
+            data_sha = None   # load_record names the problem
+        if data_sha is not None:
+            check_target(default_target(run_id_of(lc, data_sha)), inputs=inputs, default=True)
     ctx = analyse(lc)
-    return write_run(ctx, Path(out) if out else None, html=html)
+    return write_run(ctx, Path(out) if out is not None else None, html=html)

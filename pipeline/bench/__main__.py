@@ -10,7 +10,8 @@ import sys
 import time
 from pathlib import Path
 
-SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.structures"]
+SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.structures",
+            "pipeline.bench.assignment"]
 
 
 def main(argv=None) -> int:
@@ -35,7 +36,13 @@ def main(argv=None) -> int:
             continue
         print(f"[bench] {short} ...", file=sys.stderr, flush=True)
         parts.append("\n" + mod.run(quick=a.quick).strip() + "\n")
-    Path(a.out).write_text("\n".join(parts))
+    out = Path(a.out)
+    # keep the section of `make bench-diagnosis` (pipeline.bench.diagnosis), which runs separately
+    from .diagnosis import END, START
+    old = out.read_text() if out.exists() else ""
+    if START in old and END in old:
+        parts.append("\n" + old[old.index(START):old.index(END) + len(END)] + "\n")
+    out.write_text("\n".join(parts))
     print(f"wrote {a.out}")
     return 0
 

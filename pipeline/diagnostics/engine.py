@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import criteria
 from ..fit import FitResult, Problem, fit_output_error, simulate_until, states_full
-from ..model import Model, rhs_vectorized, term_values
+from ..model import Model, rhs_vectorized, term_on
 from ..simulate import simulate_states
 from . import stats
 from ..config import NOISE_FAMILIES
@@ -135,15 +135,13 @@ class Diagnoser:
         term = next((t for t in hyp.terms if t.coef == coef), None)
         if term is None:  # input delay
             return 0.5 * self.dt
-        if term.kind == "out_const":
+        if term.is_output:
             return 1e-3 * float(np.std(self.prob.Y[:, 0]) or 1.0)
-        m = fit.model
+        m = self.hyp_model(fit, hyp)
         i = m.states.index(term.target)
-        dscale = float(np.std(np.gradient(X[:, i], self.dt))) or 1.0
-        z = X[:, m.states.index(term.var)] if term.var else None
-        tscale = {"const": 1.0, "sin": 0.7, "cos": 0.7}.get(term.kind)
-        if tscale is None:
-            tscale = float(np.std(term_values(term.kind, z, self.prob.t, term.power))) or 1.0
+        dscale = float(np.nanstd(np.gradient(X[:, i], self.dt))) or 1.0
+        vals = term_on(m, term, X, self.prob.U, self.prob.t)
+        tscale = float(np.sqrt(np.nanmean(vals ** 2))) or 1.0
         return 1e-3 * dscale / tscale
 
     def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
@@ -268,7 +266,7 @@ class Diagnoser:
         on the measured states; HAC Wald test of the slope (intercept partialled out)."""
         m = fit.model
         prob = self.prob
-        if hyp.equation is None or not all(st in prob.out_names for st in m.states):
+        if hyp.equation is None or m.extra_states or not all(st in prob.out_names for st in m.states):
             return None
         from scipy.signal import savgol_filter
         sl = prob.split.est_slice()
@@ -279,12 +277,8 @@ class Diagnoser:
         dx = savgol_filter(X[:, i], 7, 2, deriv=1, delta=self.dt)
         f = rhs_vectorized(m, X, prob.U[sl], prob.t[sl])[:, i]
         eps = dx - f
-        cols = []
-        for term in hyp.terms:
-            z = X[:, m.states.index(term.var)] if term.var else None
-            fz = float(hyp.extra_params.get(term.freq, 0.0)) if term.freq else 0.0
-            cols.append(term_values(term.kind, z, prob.t[sl], term.power, fz))
-        S = np.column_stack(cols)
+        mh = self.hyp_model(fit, hyp)
+        S = np.column_stack([term_on(mh, term, X, prob.U[sl], prob.t[sl]) for term in hyp.terms])
         # partial out the fitted parameters: J = ∂f_i/∂θ at θ̂ (central differences), an LM test in
         # equation-error form (the biased θ̂ of a misspecified model absorbs part of a missing term)
         J = []

@@ -1,0 +1,93 @@
+"""The diagnosis bench's grid and scoring (pipeline.bench.diagnosis)."""
+
+import pytest
+
+from pipeline.bench import diagnosis as bd
+from pipeline.bench.independent import menu
+from pipeline.bench.independent.effects import UNIDENTIFIABLE
+from pipeline.errors import ConfigError
+
+
+def test_tuning_and_test_seeds_are_disjoint_and_the_grid_covers_every_kind():
+    assert not set(bd.TUNE_SEEDS) & set(bd.TEST_SEEDS)
+    g = bd.grid(bd.TUNE_SEEDS)
+    fams = {f for f, v in menu()["families"].items()}
+    assert {s.family for s in g} == fams
+    assert {s.seed for s in g} <= set(bd.TUNE_SEEDS)
+    for fam in fams - {"none"}:
+        mine = [s for s in g if s.family == fam]
+        assert {s.noise for s in mine} == set(bd.NOISE_LEVELS), fam
+        assert len({s.magnitude for s in mine}) == 3, fam
+    assert not any((s.family, s.input_kind) in UNIDENTIFIABLE for s in g)
+    nulls = [s for s in g if s.family == "none"]
+    assert len(nulls) >= 40 and {s.colour for s in nulls} == {"white", "ar0.5", "ar0.9"}
+    assert len(set(g)) == len(g)
+    q = bd.grid(bd.TEST_SEEDS, quick=True)
+    assert {s.family for s in q} == fams and {s.seed for s in q} == {bd.TEST_SEEDS[0]}
+
+
+def test_label_is_the_first_finding_else_the_verdict():
+    assert bd.label_of("discrepancy", [{"family": "offset"}, {"family": "colored_noise"}]) == "offset"
+    assert bd.label_of("no_significant_discrepancy", []) == "none"
+    assert bd.label_of("unexplained_discrepancy", []) == "unexplained_discrepancy"
+
+
+def _truth(family, params, n=1000, dt=0.02):
+    return {"family": family, "params": params, "n": n, "dt": dt, "noise": {"phi": 0.0}}
+
+
+def test_parameter_errors_use_the_issue_tolerances():
+    e = bd.parameter_error(_truth("cubic_stiffness", {"equation": "v", "term": "x**3", "coefficient": -2.0}),
+                           {"equation": "v", "term": "x ** 3", "coefficient": -2.2})
+    assert e["coefficient"]["error"] == pytest.approx(0.1) and e["coefficient"]["ok"]
+    assert e["term"]["ok"] and e["equation"]["ok"]
+    e = bd.parameter_error(_truth("input_delay", {"delay_s": 0.02}), {"delay_s": 0.07})
+    assert e["delay_s"]["error"] == pytest.approx(2.5) and not e["delay_s"]["ok"]
+    e = bd.parameter_error(_truth("parameter_jump", {"parameter": "k", "time_s": 8.0, "before": 4.0, "after": 5.0}),
+                           {"parameter": "k", "time_s": 9.5, "before": 4.1, "after": 5.0})
+    assert e["time_s"]["error"] == pytest.approx(1.5 / 20.0) and not e["time_s"]["ok"]
+    assert e["before"]["ok"] and e["after"]["error"] == 0.0
+    e = bd.parameter_error(_truth("periodic_disturbance", {"equation": "v", "frequency_hz": 1.0, "amplitude": 2.0}),
+                           {"equation": "x", "frequency_hz": 1.06, "amplitude": 2.0})
+    assert not e["frequency_hz"]["ok"] and not e["equation"]["ok"]
+    e = bd.parameter_error(_truth("dead_zone", {"width": 0.5}), {"family": "dead_zone"})
+    assert e["width"]["error"] is None and not e["width"]["ok"]        # key missing counts as wrong
+
+
+def test_null_false_alarms():
+    white = _truth("none", {})
+    ar = dict(white, noise={"phi": 0.9})
+    assert bd.null_outcome(white, []) == {"physical_false_alarm": False, "any_false_alarm": False}
+    assert bd.null_outcome(ar, [{"family": "colored_noise"}]) == {"physical_false_alarm": False, "any_false_alarm": False}
+    assert bd.null_outcome(white, [{"family": "colored_noise"}])["any_false_alarm"]
+    assert bd.null_outcome(ar, [{"family": "coulomb_friction"}])["physical_false_alarm"]
+
+
+def test_section_replaces_only_its_own_block(tmp_path):
+    p = tmp_path / "BENCHMARKS.md"
+    p.write_text("# Benchmarks\n\n## Issue 2\n\nrow\n")
+    sec1 = f"{bd.START}\n## Diagnosis\nfirst\n{bd.END}\n"
+    bd.write_section(p, sec1)
+    bd.write_section(p, sec1.replace("first", "second"))
+    text = p.read_text()
+    assert text.startswith("# Benchmarks\n\n## Issue 2\n\nrow\n")
+    assert "second" in text and "first" not in text and text.count(bd.START) == 1
+
+
+def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeypatch):
+    spec = bd.Spec("offset", "dcmotor", bd.TEST_SEEDS[0], "large", 0.02, "white", "band", n=600)
+    r = bd.run_one(spec, str(tmp_path))
+    assert r["status"] == "ok" and r["truth"]["family"] == "offset"
+    assert r["label"] == "offset" and r["parameter_error"]["equation"]["ok"]
+    assert 0 < r["seconds_analyse"] < 120
+    assert not (tmp_path / r["name"]).exists()                        # the case folder is cleaned up
+
+    import pipeline.runs
+
+    def bad(lc):
+        raise ConfigError("broken", file="x.yaml", key="model")
+    monkeypatch.setattr(pipeline.runs, "analyse", bad)
+    r = bd.run_one(spec, str(tmp_path))
+    assert r["status"] == "input_error" and r["label"] == "input_error" and "broken" in r["error"]
+    s = bd.summarise([r])
+    assert s["status"] == {"input_error": 1}

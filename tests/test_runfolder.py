@@ -1,0 +1,266 @@
+"""pipeline.runfolder in-process: what counts as a (complete, replaceable) run folder, the name limits,
+the temp folder, publishing, cleaning stale folders, the reader's iterator, and the kernel cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from pipeline import runfolder as rf
+from pipeline.errors import InputError
+from tests.hostile.demo_project import read_only
+from tests.hostile.harness import assert_bad_input, run_cli
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _make_run(folder: Path, files: dict[str, str] | None = None, run_id: str = "demo-0") -> Path:
+    """A complete run folder written the way write_run writes it (temp, files, finalize, publish)."""
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = rf.make_temp(folder)
+    for name, text in (files or {"summary.json": "{}\n", "metrics.json": "[]\n"}).items():
+        (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp / name).write_text(text)
+    rf.finalize(tmp, run_id)
+    return rf.publish(tmp, folder)
+
+
+def _dead_pid() -> int:
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+# ------------------------------------------------------------ recognising run folders
+
+def test_marker_lists_every_file_with_its_size_and_only_complete_folders_count(tmp_path):
+    run = _make_run(tmp_path / "run", {"summary.json": "{}\n", "sub/fig.png": "xyz"})
+    m = json.loads((run / rf.MARKER).read_text())
+    assert m["tool"] == "sysid-pipeline" and m["files"] == {"summary.json": 3, "sub/fig.png": 3}
+    assert rf.is_complete_run(run) and rf.is_replaceable_run(run)
+    (run / "sub" / "fig.png").write_text("xy")             # truncated
+    assert not rf.is_complete_run(run)
+    (run / "sub" / "fig.png").unlink()                     # missing
+    assert not rf.is_complete_run(run)
+
+
+def test_a_run_folder_with_a_users_file_is_complete_but_not_replaceable(tmp_path):
+    run = _make_run(tmp_path / "run")
+    (run / "notes.md").write_text("mine\n")
+    assert rf.is_complete_run(run) and not rf.is_replaceable_run(run)
+    with pytest.raises(InputError, match="--out.*did not write"):
+        rf.check_target(run, inputs=[], default=False)
+
+
+@pytest.mark.parametrize("marker", [
+    {"tool": "other-tool", "format": 1, "files": {}},
+    {"tool": "sysid-pipeline", "files": {"../outside.txt": 2}},
+    {"tool": "sysid-pipeline", "files": {"/etc/hostname": 2}},
+    "not an object",
+])
+def test_foreign_or_hostile_markers_are_not_run_folders(tmp_path, marker):
+    d = tmp_path / "d"
+    d.mkdir()
+    (tmp_path / "outside.txt").write_text("x\n")
+    (d / rf.MARKER).write_text(json.dumps(marker))
+    assert not rf.is_complete_run(d)
+
+
+def test_symlink_to_a_run_folder_is_not_a_run_folder(tmp_path):
+    run = _make_run(tmp_path / "run")
+    (tmp_path / "lnk").symlink_to(run)
+    assert not rf.is_complete_run(tmp_path / "lnk")
+
+
+def test_legacy_run_folder_recognised_only_with_the_old_files(tmp_path):
+    d = tmp_path / "old"
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps({"schema": "sysid-summary/1"}))
+    (d / "manifest.json").write_text(json.dumps({"versions": {"sysid-pipeline": "0.1.0"}}))
+    (d / "report.html").write_text("<html></html>")
+    assert rf.is_complete_run(d) and rf.is_replaceable_run(d)
+    (d / "thesis.tex").write_text("x")
+    assert not rf.is_complete_run(d)
+
+
+def test_iter_run_folders_yields_complete_ones_only_never_hidden_or_linked(tmp_path):
+    a = _make_run(tmp_path / "a")
+    b = _make_run(tmp_path / "group" / "b")
+    _make_run(tmp_path / ".hidden-run")
+    stale = tmp_path / f".c.tmp-{_dead_pid()}-0123abcd"       # a complete copy under a temp name
+    stale.mkdir()
+    (stale / "summary.json").write_text("{}\n")
+    rf.finalize(stale, "demo-0")
+    partial = tmp_path / "partial"
+    partial.mkdir()
+    (partial / "summary.json").write_text("{}\n")
+    (tmp_path / "link").symlink_to(a)
+    (tmp_path / "file.json").write_text("{}")
+    assert list(rf.iter_run_folders(tmp_path)) == [a, b]
+
+
+# ------------------------------------------------------------ names and the temp folder
+
+def test_longest_allowed_name_can_really_be_written_and_one_byte_more_is_refused(tmp_path):
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    # the temp name adds "." + "." + "tmp-" + pid (up to 10 digits) + "-" + 8 hex = 25 bytes
+    longest = "r" * (name_max - 25)
+    target = rf.check_target(tmp_path / longest, inputs=[], default=False)
+    _make_run(target)
+    assert rf.is_complete_run(target)
+    _make_run(target)                                      # a rerun uses the ".old-" name too
+    assert os.listdir(tmp_path) == [longest]
+    with pytest.raises(InputError, match=f"--out.*{name_max - 24} bytes"):
+        rf.check_target(tmp_path / (longest + "r"), inputs=[], default=False)
+
+
+@pytest.mark.parametrize("umask,mode", [(0o022, 0o755), (0o077, 0o700), (0o002, 0o775)])
+def test_temp_folder_is_hidden_unique_and_follows_the_umask(tmp_path, umask, mode):
+    old = os.umask(umask)
+    try:
+        t1, t2 = rf.make_temp(tmp_path / "run"), rf.make_temp(tmp_path / "run")
+    finally:
+        os.umask(old)
+    assert t1 != t2
+    for t in (t1, t2):
+        assert re.fullmatch(rf"\.run\.tmp-{os.getpid()}-[0-9a-f]{{8}}", t.name)
+        assert t.stat().st_mode & 0o7777 == mode
+        assert not (t / rf.MARKER).exists() and not rf.is_complete_run(t)
+
+
+# ------------------------------------------------------------ publishing
+
+def test_publish_replaces_a_complete_run_and_leaves_nothing_hidden(tmp_path):
+    target = _make_run(tmp_path / "run", {"summary.json": "old\n", "report.html": "old\n"})
+    _make_run(target, {"summary.json": "new\n"})
+    assert sorted(os.listdir(target)) == [rf.MARKER, "summary.json"]
+    assert (target / "summary.json").read_text() == "new\n"
+    assert os.listdir(tmp_path) == ["run"]
+
+
+def test_publish_refuses_a_target_that_got_user_files_during_the_run(tmp_path):
+    target = tmp_path / "run"
+    target.mkdir()
+    rf.check_target(target, inputs=[], default=False)      # empty: accepted before the analysis
+    tmp = rf.make_temp(target)
+    (tmp / "summary.json").write_text("{}\n")
+    rf.finalize(tmp, "demo-0")
+    (target / "precious.txt").write_text("created while the run was analysing\n")
+    with pytest.raises(InputError, match="--out"):
+        rf.publish(tmp, target)
+    assert os.listdir(target) == ["precious.txt"]
+    assert (target / "precious.txt").read_text() == "created while the run was analysing\n"
+
+
+def test_publish_does_not_follow_a_symlink_planted_during_the_run(tmp_path):
+    (tmp_path / "victim").mkdir()
+    (tmp_path / "victim" / "keep.txt").write_text("keep\n")
+    target = tmp_path / "run"
+    tmp = rf.make_temp(target)
+    rf.finalize(tmp, "demo-0")
+    target.symlink_to(tmp_path / "victim")
+    with pytest.raises(InputError, match="--out"):
+        rf.publish(tmp, target)
+    assert os.listdir(tmp_path / "victim") == ["keep.txt"]
+
+
+# ------------------------------------------------------------ stale folders
+
+def test_clean_stale_removes_only_dead_or_day_old_folders_of_this_tools_naming(tmp_path):
+    dead, me = _dead_pid(), os.getpid()
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep.txt").write_text("keep\n")
+    made = {
+        f".demo.tmp-{dead}-0123abcd": "dir", f".other.old-{dead}-89abcdef": "dir",
+        f".demo.tmp-{me}-0123abcd": "dir", f".demo.tmp-{me}-fedcba98": "dir-day-old",
+        f".demo.tmp-{dead}-0123abc": "dir",            # 7 hex: not our naming
+        f"demo.tmp-{dead}-0123abcd": "dir",            # not hidden: not our naming
+        f".demo.tmp-{dead}-0123ABCD": "dir",           # upper-case hex: not our naming
+        f".demo.bak-{dead}-0123abcd": "dir",
+        f".demo.tmp-{dead}-aaaaaaaa": "file",
+        f".demo.tmp-{dead}-bbbbbbbb": "link",
+    }
+    for name, kind in made.items():
+        p = tmp_path / name
+        if kind == "file":
+            p.write_text("x")
+        elif kind == "link":
+            p.symlink_to(victim)
+        else:
+            p.mkdir()
+            (p / "summary.json").write_text("{}")
+            if kind == "dir-day-old":
+                t = time.time() - 2 * rf.STALE_AGE_S
+                os.utime(p, (t, t))
+    removed = {p.name for p in rf.clean_stale(tmp_path)}
+    assert removed == {f".demo.tmp-{dead}-0123abcd", f".other.old-{dead}-89abcdef", f".demo.tmp-{me}-fedcba98"}
+    assert set(os.listdir(tmp_path)) == (set(made) - removed) | {"victim"}
+    assert os.listdir(victim) == ["keep.txt"]
+
+
+# ------------------------------------------------------------ check_target details
+
+def test_inputs_are_compared_after_resolving_symlinks(tmp_path):
+    (tmp_path / "data").mkdir()
+    rec = tmp_path / "data" / "rec.csv"
+    rec.write_text("t,u\n")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "rec.csv").symlink_to(rec)  # the input is named through a link
+    with pytest.raises(InputError, match="contains the input"):
+        rf.check_target(tmp_path / "data", inputs=[tmp_path / "elsewhere" / "rec.csv"], default=False)
+    assert rf.check_target(tmp_path / "data" / "run", inputs=[rec], default=False) == tmp_path / "data" / "run"
+
+
+def test_default_parent_may_be_missing_a_given_one_may_not(tmp_path):
+    assert rf.check_target(tmp_path / "reports" / "r", inputs=[], default=True) == tmp_path / "reports" / "r"
+    assert not (tmp_path / "reports").exists()             # created only when the run is written
+    with pytest.raises(InputError, match="does not exist"):
+        rf.check_target(tmp_path / "reports" / "r", inputs=[], default=False)
+
+
+def test_read_only_parent_is_refused_in_process(tmp_path):
+    d = tmp_path / "ro"
+    d.mkdir()
+    with read_only(d):
+        with pytest.raises(InputError, match="--out.*(not writable|cannot create)"):
+            rf.check_target(d / "run", inputs=[], default=False)
+
+
+# ------------------------------------------------------------ kernel cache
+
+def test_kernel_cache_that_is_a_file_is_bad_input(tmp_path, monkeypatch):
+    from pipeline.simulate import _cache_dir
+    (tmp_path / "cache").write_text("a file\n")
+    monkeypatch.setenv("SYSID_KERNEL_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(InputError, match=f"SYSID_KERNEL_CACHE={re.escape(str(tmp_path / 'cache'))}"):
+        _cache_dir()
+
+
+def test_kernel_cache_in_a_read_only_place_is_bad_input(tmp_path, monkeypatch):
+    from pipeline.simulate import _cache_dir
+    d = tmp_path / "ro"
+    d.mkdir()
+    with read_only(d):
+        monkeypatch.setenv("SYSID_KERNEL_CACHE", str(d / "cache"))
+        with pytest.raises(InputError, match="SYSID_KERNEL_CACHE=.*ro/cache"):
+            _cache_dir()
+    monkeypatch.setenv("SYSID_KERNEL_CACHE", "/proc/sysid-cache")
+    with pytest.raises(InputError, match="SYSID_KERNEL_CACHE=/proc/sysid-cache"):
+        _cache_dir()
+
+
+def test_kernel_cache_problem_through_the_cli_is_one_error_line(tmp_path):
+    (tmp_path / "cache").write_text("a file\n")
+    (tmp_path / "out").mkdir()
+    res = run_cli("diagnose", str(ROOT / "configs" / "demo.yaml"), "--out", str(tmp_path / "out" / "r"),
+                  env={"SYSID_KERNEL_CACHE": str(tmp_path / "cache")})
+    assert_bad_input(res, "SYSID_KERNEL_CACHE", str(tmp_path / "cache"))
+    assert os.listdir(tmp_path / "out") == []
