@@ -248,7 +248,7 @@ def _run_case(tmp_path: Path, name: str):
     cfg = {"name": "hostile", "seed": 0, "data": data, "model": MODEL, **extra}
     (d / "c.yaml").write_text(yaml.safe_dump(cfg))
     before = snapshot(d)
-    out = tmp_path / "runs" / "r"
+    out = tmp_path / "r"      # its parent exists: --out refuses a missing parent folder
     res = run_cli("report", str(d / "c.yaml"), "--out", str(out))
     return res, [e.replace("{dir}", str(d)).replace("{cfg}", str(d / "c.yaml")) for e in expected], d, before, out
 
@@ -258,7 +258,7 @@ def test_hostile_data_input(tmp_path, name):
     res, expected, d, before, out = _run_case(tmp_path, name)
     assert_bad_input(res, *expected)
     assert snapshot(d) == before, "the run changed the case folder"
-    assert not out.exists() and not (tmp_path / "runs").exists()
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["case"]
 
 
 def test_file_above_the_default_size_bound_is_refused_before_reading(tmp_path):
@@ -275,7 +275,7 @@ def test_file_above_the_default_size_bound_is_refused_before_reading(tmp_path):
     cfg = {"name": "hostile", "data": {"path": str(big), "time": "t", "inputs": ["u"], "outputs": ["x"]}, "model": MODEL}
     (d / "c.yaml").write_text(yaml.safe_dump(cfg))
     before = snapshot(d)
-    res = run_cli("report", str(d / "c.yaml"), "--out", str(tmp_path / "runs" / "r"), timeout=60)
+    res = run_cli("report", str(d / "c.yaml"), "--out", str(tmp_path / "r"), timeout=60)
     assert_bad_input(res, str(big), "data.path", "2 GiB, more than data.max_bytes (2 GiB)")
-    assert snapshot(d) == before and not (tmp_path / "runs").exists()
+    assert snapshot(d) == before and sorted(p.name for p in tmp_path.iterdir()) == ["big", "case"]
     assert (big.stat().st_size, big.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
