@@ -212,13 +212,13 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
     """Read and check one record: lengths, finiteness, time axis, size."""
     f = str(src.path)
     key = None if src.key == "data" else src.key
-    needed: dict[str, str] = {}
-    if src.time is not None:
-        needed[src.time] = "time"
+    needed: dict[str, str] = {}           # checked in this order: inputs, outputs, time (as before)
     for c in src.input_map:
         needed.setdefault(c, "input")
     for c in src.output_map:
         needed.setdefault(c, "output")
+    if src.time is not None:
+        needed.setdefault(src.time, "time")
     cols = read_columns(src.path, src.spec, needed, time=src.time, key=key)
     log: list[str] = []
     ref = next(iter(needed))
