@@ -56,7 +56,57 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=False)
 
 
-class DataCfg(_Strict):
+def _unique_targets(v: Union[list[str], dict[str, str], None]):
+    """Two data columns mapped to one model name would silently drop one of them."""
+    if isinstance(v, dict):
+        seen: dict[str, str] = {}
+        for col, name in v.items():
+            if name in seen:
+                raise ValueError(f"columns {seen[name]!r} and {col!r} both map to {name!r}; map each model "
+                                 "name to one column")
+            seen[name] = col
+    elif isinstance(v, list) and len(set(v)) != len(v):
+        dup = next(c for c in v if v.count(c) > 1)
+        raise ValueError(f"column {dup!r} is listed twice")
+    return v
+
+
+class _ReadCfg(_Strict):
+    """How one data file is read (pipeline.loaders). Shared by ``data`` and its experiments."""
+
+    format: Literal["csv", "parquet", "mat", "table"] | None = None
+    # table (headerless text): the name of every column, in file order; the count must match the file's
+    columns: list[str] | None = None
+    delimiter: str | None = Field(default=None, min_length=1, max_length=1)  # csv ","; table: whitespace
+    decimal: Literal[".", ","] | None = None                     # default "."
+    comment: str | None = Field(default=None, min_length=1, max_length=1)  # default "#" (table only)
+    skip_rows: Annotated[Integer, Field(ge=0)] | None = None   # lines skipped before header/data
+
+    @field_validator("columns")
+    @classmethod
+    def _distinct_columns(cls, v):
+        return _unique_targets(v)
+
+
+class ExperimentCfg(_ReadCfg):
+    """A separate record (contract §4): keys left out are taken from ``data`` (``time`` and
+    ``sample_time`` together: giving either replaces both)."""
+
+    name: str | None = Field(default=None, min_length=1)
+    path: str | None = None
+    time: str | None = None
+    sample_time: Annotated[Finite, Field(gt=0)] | None = None
+    inputs: Union[list[str], dict[str, str], None] = None
+    outputs: Union[list[str], dict[str, str], None] = None
+    role: Literal["estimation", "validation"] | None = None
+
+    @field_validator("inputs", "outputs")
+    @classmethod
+    def _one_column_per_name(cls, v):
+        return _unique_targets(v)
+
+
+class DataCfg(_ReadCfg):
     path: str
     time: str | None = None
     sample_time: Annotated[Finite, Field(gt=0)] | None = None
@@ -64,10 +114,20 @@ class DataCfg(_Strict):
     outputs: Union[list[str], dict[str, str]]
     intersample: Literal["zoh", "foh"] = "zoh"
     remove_mean: StrictBool = False
-    format: Literal["csv", "parquet", "mat"] | None = None
     # largest tolerated relative deviation of a sampling interval from the median one
     max_jitter: Annotated[Finite, Field(ge=0, le=0.5)] = 0.01
     min_samples: Annotated[Integer, Field(ge=4)] = 50
+    # bounds checked before a file is read: its size (and, for .mat/Parquet, its decoded size) and rows
+    max_bytes: Annotated[Integer, Field(ge=1)] = 2 << 30
+    max_samples: Annotated[Integer, Field(ge=1)] = 50_000_000
+    # separate records: one validation record, or a list of experiments with roles (contract §4)
+    validation: ExperimentCfg | None = None
+    experiments: list[ExperimentCfg] | None = Field(default=None, min_length=1)
+
+    @field_validator("inputs", "outputs")
+    @classmethod
+    def _one_column_per_name(cls, v):
+        return _unique_targets(v)
 
 
 InitialValue = Union[Finite, Literal["data", "estimate"]]

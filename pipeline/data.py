@@ -1,11 +1,26 @@
-"""Records: loading (CSV, Parquet, MATLAB v5 .mat), validation, fingerprint, split.
+"""Records: loading (pipeline.loaders: CSV, headerless tables, Parquet, MATLAB .mat), validation,
+separate estimation/validation records, fingerprint, split, prefilters.
 
 Policies (each explicit; violations are :class:`DataError` naming file and column):
 * missing column, non-numeric values, NaN/inf: error with the first offending row;
+* vectors of one record (time, inputs, outputs) of different lengths: error naming both and their
+  lengths (a .mat file can hold vectors of any length);
 * time not strictly increasing: error with the first offending row;
 * sampling intervals deviating from the median by more than ``data.max_jitter`` (relative): error that
   says by how much; smaller jitter is accepted, logged, and the median interval is used;
-* fewer than ``data.min_samples`` samples, or a constant input: error.
+* fewer than ``data.min_samples`` samples (in any record, and again after ``decimate``), or a constant
+  input: error;
+* files are bounded before they are read: ``data.max_bytes`` (default 2 GiB) and ``data.max_samples``
+  rows (default 50 million); see :mod:`pipeline.loaders`.
+
+Separate records (contract §4). ``data.validation: {...}`` adds one validation record to the one
+``data`` describes (the estimation record); ``data.experiments: [{..., role: estimation|validation}]``
+lists every record instead (``data`` then only gives defaults). An experiment's missing keys are
+taken from ``data`` (``path`` too, so side-by-side columns of one file work); ``time`` and
+``sample_time`` go together: giving either replaces both. Every record must map its columns to the
+same model inputs and outputs and be sampled at the same interval (within ``data.max_jitter``).
+The :class:`Record` holds the records concatenated, estimation ones first, and one
+:class:`Segment` per record; ``Record.t`` restarts in each segment (each record's own time).
 """
 
 from __future__ import annotations
@@ -17,14 +32,32 @@ from pathlib import Path
 import numpy as np
 
 from .config import LoadedConfig
-from .errors import DataError
+from .errors import ConfigError, DataError
+from .loaders import ReadSpec, read_columns
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Rows ``[start, stop)`` of the concatenated record that came from one experiment."""
+
+    name: str            # "record", "estimation", "validation", "experiment 2", ...
+    start: int
+    stop: int
+    role: str | None     # "estimation" | "validation" | None (a single plain record: the split decides)
+
+    @property
+    def n(self) -> int:
+        return self.stop - self.start
+
+    def rows(self) -> slice:
+        return slice(self.start, self.stop)
 
 
 @dataclass
 class Record:
-    """One measured record, columns renamed to the model's names."""
+    """One measured record (or several, concatenated), columns renamed to the model's names."""
 
-    t: np.ndarray                       # (N,) seconds, uniform
+    t: np.ndarray                       # (N,) seconds, uniform within each segment, restarting per segment
     dt: float
     inputs: dict[str, np.ndarray]       # model input name -> (N,)
     outputs: dict[str, np.ndarray]      # state / declared output name -> (N,)
@@ -32,10 +65,21 @@ class Record:
     path: str
     log: list[str] = field(default_factory=list)
     means: dict[str, float] = field(default_factory=dict)  # removed means (remove_mean)
+    segments: list[Segment] = field(default_factory=list)  # default: one Segment("record", 0, n, None)
+    sources: list[dict] = field(default_factory=list)      # per segment: name, role, path, sha256
+
+    def __post_init__(self) -> None:
+        if not self.segments:
+            self.segments = [Segment("record", 0, self.n, None)]
 
     @property
     def n(self) -> int:
         return len(self.t)
+
+    @property
+    def has_roles(self) -> bool:
+        """True when the records themselves say which rows estimate and which validate."""
+        return any(s.role is not None for s in self.segments)
 
     def u_matrix(self, names: list[str]) -> np.ndarray:
         if not names:
@@ -63,112 +107,224 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _read_table(path: Path, fmt: str | None) -> dict[str, np.ndarray]:
-    fmt = fmt or {".csv": "csv", ".txt": "csv", ".parquet": "parquet", ".pq": "parquet",
-                  ".mat": "mat"}.get(path.suffix.lower())
-    f = str(path)
-    if fmt is None:
-        raise DataError(f"unknown data format {path.suffix!r}; expected .csv, .parquet or .mat "
-                        "(or set data.format)", file=f)
-    try:
-        if fmt == "mat":
-            import scipy.io
-            try:
-                mat = scipy.io.loadmat(f, squeeze_me=False)
-            except NotImplementedError:
-                raise DataError("MATLAB v7.3 (HDF5) files are not supported; save with -v7 or -v6",
-                                file=f) from None
-            cols = {}
-            for k, v in mat.items():
-                if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
-                    continue
-                if v.ndim == 2 and 1 in v.shape and v.size > 1:
-                    cols[k] = v.ravel().astype(float)
-                elif v.ndim == 2 and v.shape[1] > 1 and v.shape[0] > 1:
-                    for j in range(v.shape[1]):
-                        cols[f"{k}_{j + 1}"] = v[:, j].astype(float)
-            return cols
-        import pandas as pd
-        if fmt == "csv":
-            df = pd.read_csv(f)
-        else:
-            df = pd.read_parquet(f)
-    except DataError:
-        raise
-    except Exception as exc:  # a broken file is bad input, not an internal error
-        raise DataError(f"cannot read as {fmt} ({type(exc).__name__}: {exc})", file=f) from None
-    df = df.loc[:, [c for c in df.columns if not (str(c).startswith("Unnamed") and df[c].isna().all())]]
-    out = {}
-    for c in df.columns:
-        s = df[c]
-        if s.dtype.kind not in "fiub":
-            conv = pd.to_numeric(s, errors="coerce")
-            bad = np.flatnonzero(conv.isna().to_numpy() & s.notna().to_numpy())
-            if len(bad):
-                out[str(c)] = ("nonnumeric", int(bad[0]), s.iloc[bad[0]])
-                continue
-            s = conv
-        out[str(c)] = s.to_numpy(dtype=float)
-    return out
+def records_sha256(entries: list[tuple[str, str | None]]) -> str:
+    """Fingerprint of several files: sha256 of the sorted lines ``"<file sha256> <role>"``. A single
+    plain record keeps its file's own sha256 (unchanged run ids)."""
+    lines = sorted(f"{sha} {role}" for sha, role in entries)
+    return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
-def load_record(lc: LoadedConfig) -> Record:
-    """Load and validate the record named by the config (columns renamed to model names)."""
+# ------------------------------------------------------------------------------------ sources
+@dataclass(frozen=True)
+class Source:
+    """One record to load, its keys resolved (an experiment's own, else ``data``'s)."""
+
+    name: str
+    role: str | None
+    key: str                      # config key: "data", "data.validation", "data.experiments[1]"
+    path: Path
+    time: str | None
+    sample_time: float | None
+    input_map: dict[str, str]     # column -> model input
+    output_map: dict[str, str]    # column -> state / declared output
+    spec: ReadSpec
+
+
+_READ_KEYS = ("format", "columns", "delimiter", "decimal", "comment", "skip_rows")
+
+
+def _as_map(v) -> dict[str, str]:
+    return {c: c for c in v} if isinstance(v, list) else dict(v)
+
+
+def _source(lc: LoadedConfig, exp, name: str, role: str | None, key: str) -> Source:
     dc = lc.cfg.data
-    path = lc.data_path
-    f = str(path)
-    if not path.is_file():
-        raise DataError("data file not found (data.path is relative to the config's folder)", file=f)
-    cols = _read_table(path, dc.format)
-    log: list[str] = []
+    f = str(lc.path)
 
-    def column(name: str, role: str) -> np.ndarray:
-        if name not in cols:
-            avail = ", ".join(list(cols)[:12]) or "(none)"
-            raise DataError(f"column {name!r} ({role}) not found; columns: {avail}", file=f)
+    def pick(k):
+        own = getattr(exp, k, None) if exp is not None else None
+        return own if own is not None else getattr(dc, k)
+
+    if exp is not None and (exp.time is not None or exp.sample_time is not None):
+        if exp.time is not None and exp.sample_time is not None:
+            raise ConfigError("give time or sample_time, not both", file=f, key=key)
+        time, sample_time = exp.time, exp.sample_time
+    else:
+        time, sample_time = dc.time, dc.sample_time
+    p = Path(pick("path"))
+    path = p if p.is_absolute() else lc.path.parent / p
+    rd = {k: pick(k) for k in _READ_KEYS}
+    spec = ReadSpec(format=rd["format"], columns=tuple(rd["columns"]) if rd["columns"] else None,
+                    delimiter=rd["delimiter"], decimal=rd["decimal"] or ".", comment=rd["comment"],
+                    skip_rows=rd["skip_rows"] or 0, max_bytes=dc.max_bytes, max_samples=dc.max_samples)
+    imap, omap = _as_map(pick("inputs")), _as_map(pick("outputs"))
+    for what, m, want in (("inputs", imap, lc.input_map), ("outputs", omap, lc.output_map)):
+        if sorted(m.values()) != sorted(want.values()):
+            raise ConfigError(f"maps columns to {sorted(m.values())}, data.{what} to {sorted(want.values())}; "
+                              f"every record must give the same model {what}", file=f, key=f"{key}.{what}")
+    return Source(name, role, key, path, time, sample_time, imap, omap, spec)
+
+
+def sources(lc: LoadedConfig) -> list[Source]:
+    """The records the config names, estimation ones first (config errors name the key)."""
+    dc = lc.cfg.data
+    f = str(lc.path)
+    if dc.validation is not None and dc.experiments is not None:
+        raise ConfigError("give data.validation or data.experiments, not both", file=f, key="data")
+    if dc.validation is not None:
+        v = dc.validation
+        if v.role == "estimation":
+            raise ConfigError("the validation record cannot have role estimation", file=f, key="data.validation.role")
+        return [_source(lc, None, "estimation", "estimation", "data"),
+                _source(lc, v, v.name or "validation", "validation", "data.validation")]
+    if dc.experiments is not None:
+        out, names = [], set()
+        for i, e in enumerate(dc.experiments):
+            key = f"data.experiments[{i}]"
+            if e.role is None:
+                raise ConfigError("role is required: estimation or validation", file=f, key=f"{key}.role")
+            name = e.name or f"experiment {i + 1}"
+            if name in names:
+                raise ConfigError(f"experiment name {name!r} is used twice", file=f, key=f"{key}.name")
+            names.add(name)
+            out.append(_source(lc, e, name, e.role, key))
+        roles = {s.role for s in out}
+        for role in ("estimation", "validation"):
+            if role not in roles:
+                raise ConfigError(f"no experiment has role {role}; give at least one estimation and one "
+                                  "validation experiment", file=f, key="data.experiments")
+        return [s for s in out if s.role == "estimation"] + [s for s in out if s.role == "validation"]
+    return [_source(lc, None, "record", None, "data")]
+
+
+# ------------------------------------------------------------------------------------ loading
+@dataclass
+class _Part:
+    t: np.ndarray
+    dt: float
+    inputs: dict[str, np.ndarray]
+    outputs: dict[str, np.ndarray]
+    sha256: str
+    log: list[str]
+
+
+def _load_source(src: Source, dc, plain: bool) -> _Part:
+    """Read and check one record: lengths, finiteness, time axis, size."""
+    f = str(src.path)
+    key = None if src.key == "data" else src.key
+    needed: dict[str, str] = {}           # checked in this order: inputs, outputs, time (as before)
+    for c in src.input_map:
+        needed.setdefault(c, "input")
+    for c in src.output_map:
+        needed.setdefault(c, "output")
+    if src.time is not None:
+        needed.setdefault(src.time, "time")
+    cols = read_columns(src.path, src.spec, needed, time=src.time, key=key)
+    log: list[str] = []
+    ref = next(iter(needed))
+    for name in needed:
+        if len(cols[name]) != len(cols[ref]):
+            raise DataError(f"vectors differ in length: column {name!r} ({needed[name]}) has {len(cols[name])} "
+                            f"samples, column {ref!r} ({needed[ref]}) has {len(cols[ref])}", file=f, key=key)
+
+    def column(name: str) -> np.ndarray:
         v = cols[name]
-        if isinstance(v, tuple):
-            raise DataError(f"column {name!r} has a non-numeric value {v[2]!r} at row {v[1]}", file=f)
         bad = np.flatnonzero(~np.isfinite(v))
         if len(bad):
             raise DataError(f"column {name!r} has {len(bad)} NaN/inf value(s), first at row {bad[0]}; "
-                            "clean or interpolate the record first", file=f)
+                            "clean or interpolate the record first", file=f, key=key)
         return v
 
-    ins = {model: column(c, "input") for c, model in lc.input_map.items()}
-    outs = {model: column(c, "output") for c, model in lc.output_map.items()}
-    n = len(next(iter(outs.values())))
+    ins = {model: column(c) for c, model in src.input_map.items()}
+    outs = {model: column(c) for c, model in src.output_map.items()}
+    n = len(cols[ref])
     if n < dc.min_samples:
-        raise DataError(f"only {n} samples; at least {dc.min_samples} are needed (data.min_samples)", file=f)
-    if dc.time is not None:
-        t = column(dc.time, "time")
+        raise DataError(f"only {n} samples; at least {dc.min_samples} are needed (data.min_samples)", file=f, key=key)
+    if src.time is not None:
+        t = column(src.time)
         d = np.diff(t)
         if np.any(d <= 0):
             i = int(np.flatnonzero(d <= 0)[0]) + 1
-            raise DataError(f"time column {dc.time!r} is not strictly increasing at row {i} "
-                            f"({t[i - 1]!r} then {t[i]!r})", file=f)
+            raise DataError(f"time column {src.time!r} is not strictly increasing at row {i} "
+                            f"({t[i - 1]!r} then {t[i]!r})", file=f, key=key)
         dt = float(np.median(d))
-        jitter = float(np.max(np.abs(d - dt)) / dt)
+        jitter = max(float(d.max()) - dt, dt - float(d.min())) / dt   # max |d - dt| / dt, no temporaries
+        if not np.isfinite(dt) or not np.isfinite(jitter):
+            raise DataError(f"time column {src.time!r} gives a sampling interval of {dt!r} s; give seconds",
+                            file=f, key=key)
         if jitter > dc.max_jitter:
             i = int(np.argmax(np.abs(d - dt)))
             raise DataError(f"non-uniform sampling: interval at row {i + 1} is {d[i]:.6g} s against a median "
                             f"of {dt:.6g} s ({100 * jitter:.2f} % off; data.max_jitter allows "
-                            f"{100 * dc.max_jitter:.2f} %); resample the record first", file=f)
+                            f"{100 * dc.max_jitter:.2f} %); resample the record first", file=f, key=key)
         if jitter > 1e-6:
             log.append(f"sampling jitter up to {100 * jitter:.3g} % accepted; median dt = {dt:.6g} s used")
     else:
-        dt = float(dc.sample_time)
+        dt = float(src.sample_time)
         t = np.arange(n) * dt
+    if plain:
+        _check_excited(ins, slice(None), f, key)
+    return _Part(np.asarray(t, float), dt, ins, outs, file_sha256(src.path), log)
+
+
+def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | None, where: str = "") -> None:
     for name, u in ins.items():
-        if np.ptp(u) == 0:
-            raise DataError(f"input {name!r} is constant ({u[0]!r}); a constant input excites nothing", file=f)
-    return Record(t=np.asarray(t, float), dt=dt, inputs=ins, outputs=outs, sha256=file_sha256(path),
-                  path=f, log=log)
+        if np.ptp(u[rows]) == 0:
+            raise DataError(f"input {name!r} is constant{where} ({u[rows][0]!r}); a constant input excites "
+                            "nothing", file=f, key=key)
 
 
-def make_split(lc: LoadedConfig, n: int) -> Split:
+def load_record(lc: LoadedConfig) -> Record:
+    """Load and validate the record(s) named by the config (columns renamed to model names)."""
+    dc = lc.cfg.data
+    srcs = sources(lc)
+    plain = len(srcs) == 1 and srcs[0].role is None
+    parts = [_load_source(s, dc, plain) for s in srcs]
+    info = [{"name": s.name, "role": s.role, "path": str(s.path), "sha256": p.sha256} for s, p in zip(srcs, parts)]
+    if plain:
+        p = parts[0]
+        return Record(t=p.t, dt=p.dt, inputs=p.inputs, outputs=p.outputs, sha256=p.sha256, path=str(srcs[0].path),
+                      log=p.log, sources=info)
+    dt0 = parts[0].dt
+    for s, p in zip(srcs[1:], parts[1:]):
+        if abs(p.dt - dt0) > dc.max_jitter * dt0:
+            raise DataError(f"record {s.name!r} is sampled every {p.dt:.6g} s, record {srcs[0].name!r} every "
+                            f"{dt0:.6g} s; resample one of them", file=str(s.path), key=s.key)
+    segments, start = [], 0
+    for s, p in zip(srcs, parts):
+        segments.append(Segment(s.name, start, start + len(p.t), s.role))
+        start += len(p.t)
+    cat = lambda key, name: np.concatenate([getattr(p, key)[name] for p in parts])  # noqa: E731
+    ins = {k: cat("inputs", k) for k in parts[0].inputs}
+    outs = {k: cat("outputs", k) for k in parts[0].outputs}
+    est = [g for g in segments if g.role == "estimation"]
+    _check_excited(ins, slice(est[0].start, est[-1].stop), str(srcs[0].path), None, " over the estimation records")
+    log = [m for p in parts for m in p.log]
+    log.append("records: " + "; ".join(f"{g.name} ({g.role}) rows [{g.start}, {g.stop}) from {Path(s.path).name}"
+                                       for g, s in zip(segments, srcs)))
+    return Record(t=np.concatenate([p.t for p in parts]), dt=dt0, inputs=ins, outputs=outs,
+                  sha256=records_sha256([(p.sha256, s.role) for s, p in zip(srcs, parts)]),
+                  path=str(srcs[0].path), log=log, segments=segments, sources=info)
+
+
+def make_split(lc: LoadedConfig, rec: "Record | int") -> Split:
+    """Estimation and validation rows. With separate records (segments with roles) they are the rows of
+    the estimation segments and of the validation ones (contiguous: estimation records come first), and
+    ``split`` ranges or ``validation_fraction`` are an error; otherwise the ``split`` section decides.
+    ``rec`` may be a plain sample count (no segments)."""
     s = lc.cfg.split
     f = str(lc.path)
+    n = rec.n if isinstance(rec, Record) else int(rec)
+    if isinstance(rec, Record) and rec.has_roles:
+        given = [k for k in ("estimation", "validation", "validation_fraction")
+                 if getattr(s, k) is not None and k in s.model_fields_set]
+        if given:
+            raise ConfigError(f"split.{given[0]} cannot be combined with separate estimation and validation "
+                              "records (data.validation / data.experiments roles decide the split)",
+                              file=f, key="split")
+        est = [g for g in rec.segments if g.role == "estimation"]
+        val = [g for g in rec.segments if g.role == "validation"]
+        return Split((est[0].start, est[-1].stop), (val[0].start, val[-1].stop))
     if s.estimation is not None:
         est = (s.estimation[0], n if s.estimation[1] is None else min(s.estimation[1], n))
         val = (s.validation[0], n if s.validation[1] is None else min(s.validation[1], n))
@@ -199,33 +355,68 @@ def remove_means(rec: Record, split: Split) -> None:
                    + ", ".join(f"{k}={v:.6g}" for k, v in rec.means.items()))
 
 
-def apply_prefilters(rec: Record, steps, file: str) -> list[dict]:
+def _check_prefilter_step(st, key: str, file: str) -> None:
+    """Options :mod:`pipeline.prefilter` would index with, checked before use."""
+    if st.name == "state_variable_filter" and "output" in st.params:
+        out, order = st.params["output"], st.params.get("order")
+        ok_order = isinstance(order, int) and not isinstance(order, bool) and order >= 1
+        if isinstance(out, bool) or not isinstance(out, int) or out < 0 or (ok_order and out > order):
+            rng = f"0..{order} (filtered derivatives of order 0 to {order})" if ok_order else "0..order"
+            raise DataError(f"output index {out!r} is out of range; a state_variable_filter of order {order!r} "
+                            f"gives outputs {rng}", file=file, key=f"{key}.params.output")
+
+
+def apply_prefilters(rec: Record, steps, file: str, min_samples: int | None = None) -> list[dict]:
     """Apply the config's prefilter steps (pipeline.prefilter) in order; returns the log entries.
-    ``decimate`` acts on every signal and on the time axis; other steps on ``signals`` (default all)."""
+    ``decimate`` acts on every signal and on the time axis; other steps on ``signals`` (default all).
+    Each step runs on every segment separately (a segment boundary is a break between experiments, so a
+    filter must not carry one record's state into the next). After a ``decimate`` every segment must
+    still hold ``min_samples`` samples (data.min_samples)."""
     from .errors import InputError
     from .prefilter import Prefilter
     log = []
     for i, st in enumerate(steps):
         key = f"prefilter[{i}]"
+        _check_prefilter_step(st, key, file)
         names = st.signals or list(rec.inputs) + list(rec.outputs)
         if st.name == "decimate":
             names = list(rec.inputs) + list(rec.outputs)
         step = Prefilter(st.name, dict(st.params))
+        multi = len(rec.segments) > 1
         warns, info = [], {}
+        pieces: dict[str, list[np.ndarray]] = {k: [] for d in (rec.inputs, rec.outputs) for k in d}
         try:
-            for d in (rec.inputs, rec.outputs):
-                for k in d:
-                    if k in names:
-                        res = step.apply(d[k], rec.dt)
-                        d[k] = np.asarray(res.y, float)
-                        warns += [f"{k}: {w}" for w in res.warnings]
-                        info = res.info or info
+            for g in rec.segments:
+                for d in (rec.inputs, rec.outputs):
+                    for k in d:
+                        x = d[k][g.rows()]
+                        if k in names:
+                            res = step.apply(x, rec.dt)
+                            x = np.asarray(res.y, float)
+                            warns += [f"{k}{f' ({g.name})' if multi else ''}: {w}" for w in res.warnings]
+                            info = res.info or info
+                        pieces[k].append(x)
         except InputError as exc:
             raise DataError(str(exc), file=file, key=key) from None
+        for d in (rec.inputs, rec.outputs):
+            for k in d:
+                d[k] = np.concatenate(pieces[k]) if multi else pieces[k][0]
         if st.name == "decimate":
             q = int(st.params.get("q", 1))
-            rec.t = rec.t[::q][: len(next(iter(rec.outputs.values())))]
+            lengths = [len(p) for p in next(iter(pieces.values()))]
+            t, segs, start = [], [], 0
+            for g, m in zip(rec.segments, lengths):
+                t.append(rec.t[g.rows()][::q][:m])
+                segs.append(Segment(g.name, start, start + m, g.role))
+                start += m
+            rec.t = np.concatenate(t)
+            rec.segments = segs
             rec.dt = rec.dt * q
+            for g in segs:
+                if min_samples is not None and g.n < min_samples:
+                    what = f"segment {g.name!r}" if multi else "the record"
+                    raise DataError(f"after decimation by {q}, {what} holds {g.n} samples; at least {min_samples} "
+                                    "are needed (data.min_samples)", file=file, key=key)
         entry = {"name": st.name, "params": dict(st.params), "signals": names, "warnings": warns, "info": info}
         log.append(entry)
         rec.log.append(f"prefilter {st.name} {dict(st.params)} on {', '.join(names)}"

@@ -98,8 +98,9 @@ def input_paths(lc: LoadedConfig) -> list[Path]:
 
 def analyse(lc: LoadedConfig) -> RunContext:
     rec = load_record(lc)
-    prefilter_log = apply_prefilters(rec, lc.cfg.prefilter, str(lc.path)) if lc.cfg.prefilter else []
-    split = make_split(lc, rec.n)
+    prefilter_log = (apply_prefilters(rec, lc.cfg.prefilter, str(lc.path), lc.cfg.data.min_samples)
+                     if lc.cfg.prefilter else [])
+    split = make_split(lc, rec)
     if lc.cfg.data.remove_mean:
         remove_means(rec, split)
     model = Model.from_config(lc)
