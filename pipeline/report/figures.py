@@ -26,7 +26,9 @@ WIDTH_IN = 9.6
 DPI = 100
 COLORS = ("tab:red", "tab:green", "tab:purple", "tab:brown", "tab:cyan", "tab:olive")
 RC = {"font.size": 9, "axes.titlesize": 9.5, "axes.labelsize": 9, "xtick.labelsize": 8.5,
-      "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "svg.hashsalt": "sysid", "path.simplify": True}
+      "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "svg.hashsalt": "sysid", "path.simplify": True,
+      # user text (names, expressions) is drawn literally: "$x$" in a name is not mathtext, and a "$" never crashes
+      "text.parse_math": False}
 
 
 def _png(fig) -> str:

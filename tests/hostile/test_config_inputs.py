@@ -147,3 +147,15 @@ def test_oversized_config_is_refused_before_reading(folder):
 def test_directory_as_config(folder):
     res = run_cli("diagnose", str(folder), "--out", str(folder / "run"))
     assert_bad_input(res, "is a directory")
+
+
+def test_report_draws_user_text_literally(folder):
+    """A candidate named like broken mathtext ('$\\frac{') and HTML in a name: the report is written
+    (no matplotlib parse error) and the text appears escaped, not interpreted."""
+    name = "$\\frac{<b>M1</b>"
+    cfg = _with([("structures", {**STRUCT, "candidates": {name: ["v"]}})])
+    (folder / "c.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    res = run_cli("report", str(folder / "c.yaml"), "--out", str(folder / "run"))
+    assert res.rc == 0, res.stderr[-2000:]
+    html = (folder / "run" / "report.html").read_text()
+    assert "&lt;b&gt;M1&lt;/b&gt;" in html and "<b>M1</b>" not in html
