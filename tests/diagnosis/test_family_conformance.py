@@ -1,0 +1,84 @@
+"""Conformance over every registered effect family (as tests/estimators/test_interface.py does for the
+estimators): its hypotheses build a model that simulates, their sensitivities are finite and not all
+zero, the refit model simulates, and it describes itself with the contract's key parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from pipeline.data import Split
+from pipeline.diagnostics.engine import Diagnoser
+from pipeline.diagnostics.families import FAMILY_IDS, REGISTRY
+from pipeline.expressions import parse
+from pipeline.fit import Problem, fit_output_error
+from pipeline.model import Model
+
+KEYS = {  # contract §2 key parameters
+    "offset": {"equation", "coefficient"}, "output_offset": {"output", "value"},
+    "cubic_stiffness": {"equation", "term", "coefficient"}, "quadratic_damping": {"equation", "term", "coefficient"},
+    "coulomb_friction": {"equation", "term", "coefficient"}, "static_nonlinearity": {"equation", "term", "coefficient"},
+    "periodic_disturbance": {"equation", "frequency_hz", "amplitude"}, "input_delay": {"delay_s"},
+    "input_saturation": {"limit"}, "dead_zone": {"width"}, "parameter_jump": {"parameter", "time_s", "before", "after"},
+    "parameter_drift": {"parameter", "rate_per_s"}, "unmodeled_dynamics": {"time_constant_s"},
+    "state_saturation": {"state", "limit"},
+}
+
+
+@pytest.fixture(scope="module")
+def setting():
+    rng = np.random.default_rng(0)
+    n, dt = 1500, 0.02
+    t = np.arange(n) * dt
+    u = signal.lfilter([0.05], [1, -0.95], rng.normal(size=n)) * 8
+    sys = signal.StateSpace([[0, 1], [-4.0, -0.6]], [[0], [1]], [[1, 0]], [[0]])
+    _, y, _ = signal.lsim(sys, u, t, interp=True)
+    y = y + 0.01 * rng.normal(size=n)
+    allowed = {"x", "v", "u", "c", "k", "t"}
+    m = Model(("x", "v"), ("u",), {"x": parse("v", allowed), "v": parse("u - c*v - k*x", allowed)}, {},
+              {"c": 0.5, "k": 3.5}, ("c", "k"), {"x": 0.0, "v": 0.0}, intersample="foh", nominal_params=("c", "k"))
+    prob = Problem(t, u[:, None], y[:, None], ["x"], Split((0, 1000), (1000, n)), bound=1e6)
+    fit = fit_output_error(m, prob)
+    dg = Diagnoser(prob, alpha=0.01, families=list(FAMILY_IDS), max_findings=1, seed=0, dt=dt)
+    ctx = dg.context(fit, 0.7)
+    return dg, fit, ctx
+
+
+def test_the_registry_is_the_contract_vocabulary():
+    from pipeline.config import ALL_FAMILY_IDS
+    assert set(FAMILY_IDS) == set(ALL_FAMILY_IDS)
+    assert len(FAMILY_IDS) == len(set(FAMILY_IDS))
+
+
+@pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
+def test_family_conforms(setting, fid):
+    dg, fit, ctx = setting
+    fam = REGISTRY[fid]
+    hyps = fam.hypotheses(ctx)
+    assert hyps, f"{fid}: no hypothesis on a mass-spring-damper"
+    assert len({h.key for h in hyps}) == len(hyps)
+    for h in hyps[:4]:
+        assert h.family == fid and h.coefs
+        m = fam.extend(fit.model, h)
+        # at the null values the extension changes nothing
+        y0 = dg.sim_est(m, dg._x0_for(fit, m))
+        assert y0 is not None
+        np.testing.assert_allclose(y0, dg.sim_est(fit.model, fit.x0), atol=1e-8)
+        w = dg.test(fit, h, ctx.X)
+        assert w is not None and np.isfinite(w.statistic) and 0 <= w.p_value <= 1
+        start = {c: float(h.null.get(c, 0.0)) + 0.1 * float(b) for c, b in zip(h.coefs, w.beta)}
+        mr = fam.refit_model(fit.model, h, start)
+        assert dg.sim_est(mr, dg._x0_for(fit, mr)) is not None
+    h = hyps[0]
+    mr = fam.refit_model(fit.model, h, {c: float(h.null.get(c, 0.0)) for c in h.coefs})
+    fr = fit_output_error(mr, dg.prob, max_nfev=5)
+    val, sd = dict(zip(fr.names, fr.theta)), dict(zip(fr.names, fr.std))
+    key, sentence = fam.describe(h, fr, val, sd)
+    assert KEYS[fid] <= set(key), (fid, key)
+    assert isinstance(sentence, str) and len(sentence) > 20
+    # the extended model writes itself out in the expression language
+    eqs = fr.model.describe_equations()
+    names = set(fr.model.states) | set(fr.model.inputs) | set(fr.model.params) | {"t"}
+    for s, text in eqs.items():
+        parse(text, names)
