@@ -10,7 +10,6 @@ Noise-model findings change how the model is fitted, not the model, and are not 
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from .model import Model
@@ -48,13 +47,33 @@ def extended_config(canonical: dict, model: Model, config_path: Path, data_path:
     if outs:
         m["outputs"] = outs
     cfg["model"] = m
-    try:
-        rel = os.path.relpath(data_path.resolve(), target.resolve())
-    except ValueError:  # another drive (Windows)
-        rel = str(data_path.resolve())
-    data["path"] = rel
+    # absolute paths: the file is the same whichever folder the run is written to (and reruns into
+    # another folder give the same bytes)
+    base = Path(config_path).resolve().parent
+    data["path"] = str(data_path.resolve())
+    for key in ("validation",):
+        if isinstance(data.get(key), dict):
+            data[key] = _rebase(data[key], base, data["path"], offsets)
+    if isinstance(data.get("experiments"), list):
+        data["experiments"] = [_rebase(e, base, data["path"], offsets) for e in data["experiments"]]
     cfg["data"] = data
     return _drop_empty(cfg)
+
+
+def _rebase(exp: dict, base: Path, default: str, offsets) -> dict:
+    """An experiment's path made absolute (relative ones are relative to the config's folder) and its
+    measured columns renamed like the top-level ones when a sensor offset became a declared output."""
+    exp = dict(exp)
+    if exp.get("path"):
+        p = Path(exp["path"])
+        exp["path"] = str(p if p.is_absolute() else (base / p).resolve())
+    outs = exp.get("outputs")
+    if outs and offsets:
+        omap = outs if isinstance(outs, dict) else {c: c for c in outs}
+        for term in offsets:
+            omap = {col: (f"{term.target}_measured" if tgt == term.target else tgt) for col, tgt in omap.items()}
+        exp["outputs"] = omap
+    return exp
 
 
 def _drop_empty(x):

@@ -59,11 +59,10 @@ class Problem:
         restarts = {sg.start for sg in getattr(rec, "segments", []) if sg.start > 0}
         ws = None
         if warmup is not None:
-            ws = max(0, split.est[0] - warmup)
             seg0 = max([0] + [r for r in restarts if r <= split.est[0]])
-            ws = max(ws, seg0)
-            if ws > 0:
-                restarts.add(ws)
+            ws = max(max(0, split.est[0] - warmup), seg0)
+            if ws == seg0:
+                ws = None   # the estimation part's own segment already starts there
         return cls(rec.t, rec.u_matrix(list(model.inputs)), Y, names, split, bound=1e6 * scale,
                    restarts=tuple(sorted(restarts)), warmup_start=ws)
 
@@ -73,15 +72,17 @@ class Problem:
         s = np.std(self.Y[sl], axis=0)
         return 1.0 / np.where(s > 0, s, 1.0)
 
-    def segments(self) -> list[tuple[int, int]]:
-        """[start, stop) of each simulated segment, in order, covering the record."""
-        cuts = [0] + [r for r in self.restarts if 0 < r < len(self.t)] + [len(self.t)]
+    def segments(self, warm: bool = False) -> list[tuple[int, int]]:
+        """[start, stop) of each simulated segment, in order, covering the record: the records'
+        experiments, and with ``warm`` also the warm-up start of the estimation part."""
+        extra = [self.warmup_start] if warm and self.warmup_start else []
+        cuts = sorted({0, len(self.t), *[r for r in list(self.restarts) + extra if 0 < r < len(self.t)]})
         return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
 
     def fit_segment(self) -> tuple[int, int]:
-        """The segment that holds the first estimation sample (its x0 is the fitted one)."""
+        """The (warm-up) segment that holds the first estimation sample (its x0 is the fitted one)."""
         e0 = self.split.est[0]
-        return next(sg for sg in self.segments() if sg[0] <= e0 < sg[1])
+        return next(sg for sg in self.segments(warm=True) if sg[0] <= e0 < sg[1])
 
 
 @dataclass
@@ -164,11 +165,12 @@ def segment_x0(model: Model, prob: Problem, start: int, x0_fit: np.ndarray) -> n
     return x0
 
 
-def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: int) -> np.ndarray | None:
+def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: int, *,
+                  warm: bool = True) -> np.ndarray | None:
     """Free-run outputs on rows [0, b), simulating every segment that overlaps [a, b) (rows of other
-    segments are NaN); None if the model diverges in one of them."""
+    segments are NaN); None if the model diverges in one of them. ``warm``: with the warm-up restart."""
     out = np.full((b, prob.Y.shape[1]), np.nan)
-    for s0, s1 in prob.segments():
+    for s0, s1 in prob.segments(warm):
         if s1 <= a or s0 >= b:
             continue
         stop = min(s1, b)
@@ -187,11 +189,19 @@ def simulate_until(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np
 
 
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
-    """Free-run outputs over the whole record, segment by segment (the reported numbers).
-    SimulationError if the model diverges."""
-    Yh = simulate_rows(model, prob, x0, 0, len(prob.t))
+    """Free-run outputs over the whole record (the reported numbers): the estimation rows from the
+    fitted (warm-up) simulation, every other row from the records' own segments (so validation samples
+    never sit in a warm-up transient). SimulationError if the model diverges."""
+    Yh = simulate_rows(model, prob, x0, 0, len(prob.t), warm=False)
+    if Yh is not None and prob.warmup_start:
+        Yw = simulate_until(model, prob, x0, prob.split.est[1])
+        if Yw is None:
+            Yh = None
+        else:
+            e0, e1 = prob.split.est
+            Yh[e0:e1] = Yw[e0:e1]
     if Yh is None:
-        for s0, s1 in prob.segments():
+        for s0, s1 in prob.segments(True):
             res = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
                                   bound=prob.bound)
             if res.diverged_at is not None:
@@ -203,7 +213,7 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
 def states_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     """(N, nx) simulated states over the whole record, segment by segment (NaN after a divergence)."""
     X = np.full((len(prob.t), len(model.states)), np.nan)
-    for s0, s1 in prob.segments():
+    for s0, s1 in prob.segments(warm=False):
         X[s0:s1] = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
                                    bound=prob.bound).X
     return X
@@ -301,8 +311,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             a, b = prob.fit_segment()
             why = simulate_states(m0, prob.t[a:stop], prob.U[a:stop], x00, bound=prob.bound)
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
-            raise SimulationError(f"with its initial parameter values, {detail} (model.params, "
-                                  "model.initial)")
+            raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
+                                  "(model.params, model.initial)")
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
                             f_scale=f_scale)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)

@@ -33,8 +33,13 @@ def test_silverbox_names_cubic_stiffness_and_extended_model_reaches_1_5_mV(tmp_p
     assert f["coefficient"] < 0  # hardening spring: v' = ... + c*x**3 with c < 0
     after_cubic = f["gain"]["after"]
     assert after_cubic <= 0.0015
-    assert s["final"]["validation"]["rmse_sim"] <= 0.0015
+    # issue 8: with the causes found, the arrow's free-run RMSE is at most 1.0 mV
+    assert s["final"]["validation"]["rmse_sim"] <= 0.0010
     assert f["gain"]["ci95"][0] > 0 and f["delta_bic"] < 0
+    # the verdict says what is still wrong: any failed adequacy row is named in the summary
+    d = s["diagnosis"]
+    if d["verdict"] == "unexplained_discrepancy":
+        assert d["unexplained"]["failed_tests"] and d["unexplained"]["families_tried"]
 
 
 @pytest.mark.realdata
