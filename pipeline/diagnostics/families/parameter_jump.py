@@ -12,7 +12,7 @@ from ...model import Rewrite
 from .base import Context, Family, Hypothesis, pname
 
 GRID = 16
-SEARCH_STEPS = 6
+SEARCH_STEPS = 7
 
 
 class ParameterJump(Family):
@@ -52,7 +52,13 @@ class ParameterJump(Family):
                     return None
                 raise
 
-        a, b = hyp.extra_params[tj_name] - step, hyp.extra_params[tj_name] + step
+        # the added-term test's best grid time can be a step or two off: refit on the neighbours first
+        t0 = hyp.extra_params[tj_name]
+        near = [t0 + k * step for k in (-2, -1, 0, 1, 2)]
+        fits = [refit(tj) for tj in near]
+        k = int(np.argmin([np.inf if f is None else f.sse_w for f in fits]))
+        t0 = near[k]
+        a, b = t0 - step, t0 + step
         gr = (np.sqrt(5) - 1) / 2
         c, d = b - gr * (b - a), a + gr * (b - a)
         fc, fd = refit(c), refit(d)
