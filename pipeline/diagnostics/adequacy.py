@@ -19,7 +19,7 @@ largest error.
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.stats import chi2, norm
 
 from . import stats
 
@@ -81,6 +81,26 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
             t.name += tag
             out.append(t)
     return out
+
+
+def feedback_test(fit, prob, alpha: float) -> stats.TestResult | None:
+    """Input–residual correlation at negative lags (the residual leads the input): a sign that the
+    input was computed from the output, i.e. closed-loop data (MATLAB ``advice`` reports it). Then the
+    residual is not independent of the input and output-error estimates of a wrong model are biased
+    toward what the controller makes likely; informational, not part of the adequacy decision."""
+    sl = prob.split.est_slice()
+    if prob.U.shape[1] == 0 or np.ptp(prob.U[sl, 0]) == 0:
+        return None
+    lags, c, band = stats.crosscorr(fit.resid_est[:, 0], prob.U[sl, 0], 25, 1 - alpha)
+    neg = lags < 0
+    sd = band / norm.ppf(1 - alpha / 2)
+    worst = float(np.max(np.abs(c[neg])))
+    p = float(min(1.0, int(neg.sum()) * 2 * norm.sf(worst / sd)))
+    lag = int(lags[neg][int(np.argmax(np.abs(c[neg])))])
+    return stats.TestResult("feedback_crosscorrelation", worst, p, None, p >= alpha,
+                            f"largest input-residual correlation at negative lag {lag}"
+                            + ("" if p >= alpha else ": the input responds to the output (closed loop?); "
+                               "estimates of a misspecified model are then biased"))
 
 
 def where_it_fails(fit, prob, tests: list[stats.TestResult]) -> dict:

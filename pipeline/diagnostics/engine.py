@@ -31,7 +31,7 @@ from ..simulate import simulate_states
 from . import stats
 from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
-from .adequacy import adequacy_tests, structurally_adequate, where_it_fails
+from .adequacy import adequacy_tests, feedback_test, structurally_adequate, where_it_fails
 from .noise import diagnose_noise
 
 
@@ -463,6 +463,9 @@ class Diagnoser:
             verdict = ("unexplained_discrepancy" if any(stats.holm(ps, self.alpha).values())
                        else "no_significant_discrepancy")
         where = where_it_fails(current, prob, adequacy + final_tests) if verdict == "unexplained_discrepancy" else None
+        fb = feedback_test(nominal, prob, self.alpha)
+        if fb is not None:
+            tests0 = list(tests0) + [fb]
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
                          adequacy=adequacy, adequacy_nominal=adequacy_tests(nominal, prob, self.alpha),
                          verdict=verdict, where=where)
