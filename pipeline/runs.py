@@ -158,7 +158,9 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
             "findings": diag.findings,
             "tests": _test_rows(diag.tests, "nominal model, estimation data"),
             "final_tests": _test_rows(diag.final_tests, "final model, estimation data")
-                           + _test_rows(diag.noise_tests, "final model, estimation data (noise families)"),
+                           + _test_rows([t for t in diag.noise_tests
+                                         if t.name not in {f.name for f in diag.final_tests}],
+                                        "final model, estimation data (noise families)"),
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
             "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history)},

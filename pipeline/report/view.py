@@ -28,7 +28,7 @@ def sig(x: Any, digits: int = 4) -> str:
     if isinstance(x, float):
         if not math.isfinite(x):
             return "–"
-        s = f"{x:.{digits}g}"
+        s = f"{x:.{digits - 1}e}" if 0 < abs(x) < 1e-3 else f"{x:.{digits}g}"   # 0.00016204 -> 1.6204e-4
         return s.replace("e-0", "e-").replace("e+0", "e").replace("e+", "e")
     return str(x)
 

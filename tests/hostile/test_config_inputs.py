@@ -120,7 +120,7 @@ CASES = [
     ("unknown-option", [("structures", STRUCT), ("estimators", [{"ls": {"foo": 1}}])], ["estimators[0].ls.foo"]),
     ("ml-density", [("structures", STRUCT), ("estimators", [{"ml": {"density": "cauchy"}}])],
      ["estimators[0].ml.density"]),
-    ("unimplemented-family", [("diagnose.families", ["dead_zone"])], ["diagnose.families", "not implemented"]),
+    ("verdict-as-family", [("diagnose.families", ["none"])], ["diagnose.families", "unknown family"]),
     ("unknown-family", [("diagnose.families", ["gremlins"])], ["diagnose.families", "unknown family"]),
     ("rules-zero", [("structures", {**STRUCT, "takagi_sugeno": {"rules": [0]}})], ["structures.takagi_sugeno.rules"]),
 ]
