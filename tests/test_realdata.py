@@ -85,3 +85,23 @@ def test_cascaded_tanks_uses_its_two_records_as_given(tmp_path):
     # the validation simulation starts at the validation record's own first level
     assert ctx.diag.nominal.Yhat[1024, 0] == pytest.approx(raw[0, 3], abs=1e-12)
     assert 0.6 < s["nominal"]["validation"]["rmse_sim"] < 1.6
+
+
+@pytest.mark.realdata
+def test_dryer_names_the_transport_delay_and_no_invented_nonlinearity(tmp_path):
+    """configs/dryer.yaml (DaISy dryer, two-column text read as data.format: table): a first-order model
+    without dead time. Issue 8: input_delay of about 2-3 samples first, and no static nonlinearity,
+    stiffness, friction or saturation invented for a near-linear process."""
+    dat = require_dataset("daisy_dryer/dryer.dat")
+    cfg = yaml.safe_load((ROOT / "configs" / "dryer.yaml").read_text())
+    cfg["data"]["path"] = str(dat)
+    (tmp_path / "d.yaml").write_text(yaml.safe_dump(cfg))
+    with contextlib.redirect_stderr(io.StringIO()):
+        s = analyse(load_config(tmp_path / "d.yaml")).summary
+    assert s["data"]["n_samples"] == 1000
+    f = s["diagnosis"]["findings"]
+    assert f[0]["family"] == "input_delay" and 2.0 <= f[0]["delay_samples"] <= 3.5
+    invented = {"static_nonlinearity", "cubic_stiffness", "quadratic_damping", "coulomb_friction",
+                "input_saturation", "dead_zone", "state_saturation"}
+    assert not invented & {x["family"] for x in f}
+    assert s["final"]["validation"]["rmse_sim"] < 0.5 * s["nominal"]["validation"]["rmse_sim"]
