@@ -201,3 +201,13 @@ def test_two_runs_on_a_mat_record_are_byte_identical(tmp_path):
     a, b = (tmp_path / "a" / "summary.json").read_bytes(), (tmp_path / "b" / "summary.json").read_bytes()
     assert a == b
     assert json.loads(a)["diagnosis"]["findings"][0]["family"] == "cubic_stiffness"
+
+
+def test_the_report_says_which_parameters_are_unidentifiable():
+    from pipeline.report.view import first_screen
+    s = {"nominal": {"validation": {"fit_percent": 80.0}, "identifiability": {
+             "rank": 1, "n_params": 2, "unidentifiable": ["a", "b"], "directions": [{"a": 0.7, "b": -0.7}]}},
+         "final": {"validation": {"fit_percent": 80.0}}, "diagnosis": {"verdict": "no_significant_discrepancy",
+                                                                      "findings": [], "alpha": 0.01}}
+    w = " ".join(first_screen(s)["warnings"])
+    assert "a, b are not identifiable" in w and "rank 1 of 2" in w

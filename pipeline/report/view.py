@@ -149,6 +149,19 @@ def first_screen(s: dict) -> dict:
         warnings.append("Verdict: unexplained discrepancy. The residual tests still fail and no effect family's "
                         "extension explains what remains" + (" (the findings listed are partial)." if findings
                                                              else "."))
+        where = diag.get("unexplained") or {}
+        if where.get("failed_tests"):
+            warnings.append("Where the model fails: " + "; ".join(where["failed_tests"][:3])
+                            + (f"; largest misfit in t = {sig(where['time_window_s'][0], 4)}–"
+                               f"{sig(where['time_window_s'][1], 4)} s and output range "
+                               f"{sig(where['amplitude_range'][0], 4)} to {sig(where['amplitude_range'][1], 4)}"
+                               if where.get("time_window_s") else "") + ".")
+    for label, block in (("nominal", s.get("nominal") or {}), ("final", s.get("final") or {})):
+        idf = block.get("identifiability") or {}
+        if idf.get("unidentifiable"):
+            warnings.append(f"The {label} model's parameters {', '.join(idf['unidentifiable'])} are not identifiable "
+                            f"from these data (rank {idf.get('rank')} of {idf.get('n_params')}): moving them along "
+                            f"{idf.get('directions')} leaves the simulation unchanged; they have no standard error.")
     return {"lines": lines, "warnings": warnings, "verdict": verdict, "horizon": horizon}
 
 
