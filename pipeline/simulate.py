@@ -116,21 +116,32 @@ def ev(ops, args, consts, a, b, xs, uu, ue, p, pe, t, st):
 
 
 @njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
-def rhs(xs, uu, t, p, dx, pe, ue, st, ops, args, consts, progs):
+def rhs(xs, uu, t, p, dx, pebuf, uebuf, st, ops, args, consts, progs, n_prw, n_irw):
     np_ = progs.shape[0]
-    for i in range(p.shape[0]):
-        pe[i] = p[i]
-    for i in range(uu.shape[0]):
-        ue[i] = uu[i]
-    for j in range(np_):
-        if progs[j, 0] == 0:
-            pe[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
-    for j in range(np_):
-        if progs[j, 0] == 1:
-            ue[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
+    # effective parameters and inputs: copies only when a rewrite needs them (none: the arrays themselves)
+    if n_prw > 0:
+        for i in range(p.shape[0]):
+            pebuf[i] = p[i]
+        for j in range(np_):
+            if progs[j, 0] == 0:
+                pebuf[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, uebuf, p, pebuf, t, st)
+        pe = pebuf
+    else:
+        pe = p
+    if n_irw > 0:
+        for i in range(uu.shape[0]):
+            uebuf[i] = uu[i]
+        for j in range(np_):
+            if progs[j, 0] == 1:
+                uebuf[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, uebuf, p, pe, t, st)
+        ue = uebuf
+    else:
+        ue = uu
 {assign}
     for j in range(np_):
         k = progs[j, 0]
+        if k < 2:
+            continue
         if k == 2:
             dx[progs[j, 1]] += ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
         elif k == 3:
@@ -156,6 +167,13 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
     st = np.empty(64)
     du = np.zeros(nu)
     nl = limits.shape[0]
+    n_prw = 0
+    n_irw = 0
+    for j in range(progs.shape[0]):
+        if progs[j, 0] == 0:
+            n_prw += 1
+        elif progs[j, 0] == 1:
+            n_irw += 1
     for k in range(n):
         for i in range(nx):
             X[k, i] = xs[i]
@@ -174,16 +192,16 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
                 ua[i] = U[k, i] + du[i] * fa
                 um[i] = U[k, i] + du[i] * fm
                 ub[i] = U[k, i] + du[i] * fb
-            rhs(xs, ua, t, p, k1, pe, ue, st, ops, args, consts, progs)
+            rhs(xs, ua, t, p, k1, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
             for i in range(nx):
                 tmp[i] = xs[i] + 0.5 * h * k1[i]
-            rhs(tmp, um, t + 0.5 * h, p, k2, pe, ue, st, ops, args, consts, progs)
+            rhs(tmp, um, t + 0.5 * h, p, k2, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
             for i in range(nx):
                 tmp[i] = xs[i] + 0.5 * h * k2[i]
-            rhs(tmp, um, t + 0.5 * h, p, k3, pe, ue, st, ops, args, consts, progs)
+            rhs(tmp, um, t + 0.5 * h, p, k3, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
             for i in range(nx):
                 tmp[i] = xs[i] + h * k3[i]
-            rhs(tmp, ub, t + h, p, k4, pe, ue, st, ops, args, consts, progs)
+            rhs(tmp, ub, t + h, p, k4, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
             for i in range(nx):
                 xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
             for j in range(nl):
