@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def ev(ops, args, consts, a, b, xs, uu, ue, p, pe, t, st):
     sp = 0
     for i in range(a, b):
@@ -118,6 +118,11 @@ def ev(ops, args, consts, a, b, xs, uu, ue, p, pe, t, st):
 @njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
 def rhs(xs, uu, t, p, dx, pebuf, uebuf, st, ops, args, consts, progs, n_prw, n_irw):
     np_ = progs.shape[0]
+    if np_ == 0:   # the nominal model alone: no program to run, no copies
+        pe = p
+        ue = uu
+{assign2}
+        return
     # effective parameters and inputs: copies only when a rewrite needs them (none: the arrays themselves)
     if n_prw > 0:
         for i in range(p.shape[0]):
@@ -146,6 +151,74 @@ def rhs(xs, uu, t, p, dx, pebuf, uebuf, st, ops, args, consts, progs, n_prw, n_i
             dx[progs[j, 1]] += ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
         elif k == 3:
             dx[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
+
+
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+def rhs0(xs, ue, t, pe, dx):
+{assign}
+
+
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+def simulate0(U, T, nsub, foh, p, x0, bound, X):
+    n = U.shape[0]
+    nx = x0.shape[0]
+    nu = U.shape[1]
+    xs = x0.copy()
+    k1 = np.empty(nx)
+    k2 = np.empty(nx)
+    k3 = np.empty(nx)
+    k4 = np.empty(nx)
+    tmp = np.empty(nx)
+    ua = np.empty(nu)
+    um = np.empty(nu)
+    ub = np.empty(nu)
+    du = np.zeros(nu)
+    for k in range(n):
+        for i in range(nx):
+            X[k, i] = xs[i]
+        if k == n - 1:
+            break
+        if foh:
+            for i in range(nu):
+                du[i] = U[k + 1, i] - U[k, i]
+        h = (T[k + 1] - T[k]) / nsub
+        for s in range(nsub):
+            t = T[k] + s * h
+            fa = s / nsub
+            fm = (s + 0.5) / nsub
+            fb = (s + 1.0) / nsub
+            for i in range(nu):
+                ua[i] = U[k, i] + du[i] * fa
+                um[i] = U[k, i] + du[i] * fm
+                ub[i] = U[k, i] + du[i] * fb
+            rhs0(xs, ua, t, p, k1)
+            for i in range(nx):
+                tmp[i] = xs[i] + 0.5 * h * k1[i]
+            rhs0(tmp, um, t + 0.5 * h, p, k2)
+            for i in range(nx):
+                tmp[i] = xs[i] + 0.5 * h * k2[i]
+            rhs0(tmp, um, t + 0.5 * h, p, k3)
+            for i in range(nx):
+                tmp[i] = xs[i] + h * k3[i]
+            rhs0(tmp, ub, t + h, p, k4)
+            for i in range(nx):
+                xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        for i in range(nx):
+            if not (abs(xs[i]) <= bound):
+                for j in range(nx):
+                    X[k + 1, j] = xs[j]
+                return k + 1
+    return -1
+
+
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+def clamp(xs, p, limits):
+    for j in range(limits.shape[0]):
+        i = limits[j, 0]
+        if limits[j, 1] >= 0 and xs[i] < p[limits[j, 1]]:
+            xs[i] = p[limits[j, 1]]
+        if limits[j, 2] >= 0 and xs[i] > p[limits[j, 2]]:
+            xs[i] = p[limits[j, 2]]
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -204,12 +277,8 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
             rhs(tmp, ub, t + h, p, k4, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
             for i in range(nx):
                 xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            for j in range(nl):
-                i = limits[j, 0]
-                if limits[j, 1] >= 0 and xs[i] < p[limits[j, 1]]:
-                    xs[i] = p[limits[j, 1]]
-                if limits[j, 2] >= 0 and xs[i] > p[limits[j, 2]]:
-                    xs[i] = p[limits[j, 2]]
+            if nl > 0:
+                clamp(xs, p, limits)
         for i in range(nx):
             if not (abs(xs[i]) <= bound):
                 for j in range(nx):
@@ -345,7 +414,8 @@ def kernel_source(model: Model) -> str:
     names["t"] = "t"
     assign = [f"    dx[{i}] = {to_source(model.equations[s], names, scalar=True)}"
               for i, s in enumerate(model.nominal_states)]
-    return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign))
+    return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign),
+                            assign2="\n".join("    " + a for a in assign))
 
 
 _LOADED: dict[str, object] = {}
@@ -373,8 +443,8 @@ def get_kernel(model: Model):
     mod = importlib.util.module_from_spec(spec)
     sys.modules[modname] = mod
     spec.loader.exec_module(mod)
-    _LOADED[key] = mod.simulate
-    return mod.simulate
+    _LOADED[key] = (mod.simulate, mod.simulate0)
+    return _LOADED[key]
 
 
 @dataclass
@@ -457,8 +527,12 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     X = np.empty((n, nx))
     if n == 0:
         return SimResult(X, None)
-    status = kern(U, t, int(model.substeps), model.intersample == "foh", p, x0, pr.ops, pr.args, pr.consts,
-                  pr.progs, pr.limits, float(bound), X)
+    generic, lean = kern
+    if len(pr.progs) == 0 and len(pr.limits) == 0:   # the nominal structure alone: the lean kernel
+        status = lean(U, t, int(model.substeps), model.intersample == "foh", p, x0, float(bound), X)
+    else:
+        status = generic(U, t, int(model.substeps), model.intersample == "foh", p, x0, pr.ops, pr.args,
+                         pr.consts, pr.progs, pr.limits, float(bound), X)
     if status >= 0:
         nonfinite = bool(np.any(np.isnan(X[status])))
         X[status:] = np.nan
