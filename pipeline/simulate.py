@@ -36,123 +36,6 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def ev(ops, args, consts, a, b, xs, uu, ue, p, pe, t, st):
-    sp = 0
-    for i in range(a, b):
-        o = ops[i]
-        if o < 10:
-            if o == 0:
-                v = consts[args[i]]
-            elif o == 1:
-                v = xs[args[i]]
-            elif o == 2:
-                v = uu[args[i]]
-            elif o == 3:
-                v = ue[args[i]]
-            elif o == 4:
-                v = pe[args[i]]
-            elif o == 6:
-                v = p[args[i]]
-            else:
-                v = t
-            st[sp] = v
-            sp += 1
-        elif o < 20:
-            if o == 15:
-                st[sp - 1] = -st[sp - 1]
-                continue
-            sp -= 1
-            x = st[sp - 1]
-            y = st[sp]
-            if o == 10:
-                st[sp - 1] = x + y
-            elif o == 11:
-                st[sp - 1] = x - y
-            elif o == 12:
-                st[sp - 1] = x * y
-            elif o == 13:
-                st[sp - 1] = x / y
-            else:
-                st[sp - 1] = x ** y
-        elif o < 40:
-            x = st[sp - 1]
-            if o == 20:
-                r = np.sin(x)
-            elif o == 21:
-                r = np.cos(x)
-            elif o == 22:
-                r = np.tan(x)
-            elif o == 23:
-                r = np.exp(x)
-            elif o == 24:
-                r = np.log(x)
-            elif o == 25:
-                r = np.sqrt(x)
-            elif o == 26:
-                r = abs(x)
-            elif o == 27:
-                r = np.sign(x)
-            elif o == 28:
-                r = np.tanh(x)
-            elif o == 29:
-                r = np.sinh(x)
-            elif o == 30:
-                r = np.cosh(x)
-            elif o == 31:
-                r = np.arctan(x)
-            else:
-                r = 1.0 if x >= 0.0 else 0.0
-            st[sp - 1] = r
-        elif o < 42:
-            sp -= 1
-            x = st[sp - 1]
-            y = st[sp]
-            st[sp - 1] = min(x, y) if o == 40 else max(x, y)
-        else:
-            sp -= 2
-            st[sp - 1] = min(max(st[sp - 1], st[sp]), st[sp + 1])
-    return st[0]
-
-
-@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
-def rhs(xs, uu, t, p, dx, pebuf, uebuf, st, ops, args, consts, progs, n_prw, n_irw):
-    np_ = progs.shape[0]
-    if np_ == 0:   # the nominal model alone: no program to run, no copies
-        pe = p
-        ue = uu
-{assign2}
-        return
-    # effective parameters and inputs: copies only when a rewrite needs them (none: the arrays themselves)
-    if n_prw > 0:
-        for i in range(p.shape[0]):
-            pebuf[i] = p[i]
-        for j in range(np_):
-            if progs[j, 0] == 0:
-                pebuf[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, uebuf, p, pebuf, t, st)
-        pe = pebuf
-    else:
-        pe = p
-    if n_irw > 0:
-        for i in range(uu.shape[0]):
-            uebuf[i] = uu[i]
-        for j in range(np_):
-            if progs[j, 0] == 1:
-                uebuf[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, uebuf, p, pe, t, st)
-        ue = uebuf
-    else:
-        ue = uu
-{assign}
-    for j in range(np_):
-        k = progs[j, 0]
-        if k < 2:
-            continue
-        if k == 2:
-            dx[progs[j, 1]] += ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
-        elif k == 3:
-            dx[progs[j, 1]] = ev(ops, args, consts, progs[j, 2], progs[j, 3], xs, uu, ue, p, pe, t, st)
-
-
 @njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
 def rhs0(xs, ue, t, pe, dx):
 {assign}
@@ -212,41 +95,25 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def clamp(xs, p, limits):
-    for j in range(limits.shape[0]):
-        i = limits[j, 0]
-        if limits[j, 1] >= 0 and xs[i] < p[limits[j, 1]]:
-            xs[i] = p[limits[j, 1]]
-        if limits[j, 2] >= 0 and xs[i] > p[limits[j, 2]]:
-            xs[i] = p[limits[j, 2]]
-
-
-@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X):
     n = U.shape[0]
     nx = x0.shape[0]
     nu = U.shape[1]
+    np_ = progs.shape[0]
     xs = x0.copy()
-    k1 = np.empty(nx)
-    k2 = np.empty(nx)
-    k3 = np.empty(nx)
-    k4 = np.empty(nx)
-    tmp = np.empty(nx)
-    ua = np.empty(nu)
-    um = np.empty(nu)
-    ub = np.empty(nu)
+    K = np.empty((4, nx))
+    xt = np.empty(nx)
+    ui = np.empty(nu)
     ue = np.empty(nu)
-    pe = np.empty(p.shape[0])
+    pe = p.copy()
+    dx = np.empty(nx)
     st = np.empty(64)
     du = np.zeros(nu)
     nl = limits.shape[0]
-    n_prw = 0
-    n_irw = 0
-    for j in range(progs.shape[0]):
-        if progs[j, 0] == 0:
-            n_prw += 1
-        elif progs[j, 0] == 1:
-            n_irw += 1
+    n_pre = 0
+    for j in range(np_):
+        if progs[j, 0] < 2:
+            n_pre += 1
     for k in range(n):
         for i in range(nx):
             X[k, i] = xs[i]
@@ -257,28 +124,138 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
                 du[i] = U[k + 1, i] - U[k, i]
         h = (T[k + 1] - T[k]) / nsub
         for s in range(nsub):
-            t = T[k] + s * h
-            fa = s / nsub
-            fm = (s + 0.5) / nsub
-            fb = (s + 1.0) / nsub
-            for i in range(nu):
-                ua[i] = U[k, i] + du[i] * fa
-                um[i] = U[k, i] + du[i] * fm
-                ub[i] = U[k, i] + du[i] * fb
-            rhs(xs, ua, t, p, k1, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
+            for stage in range(4):
+                if stage == 0:
+                    c = 0.0
+                    for i in range(nx):
+                        xt[i] = xs[i]
+                elif stage == 3:
+                    c = 1.0
+                    for i in range(nx):
+                        xt[i] = xs[i] + h * K[2, i]
+                else:
+                    c = 0.5
+                    for i in range(nx):
+                        xt[i] = xs[i] + 0.5 * h * K[stage - 1, i]
+                t = T[k] + (s + c) * h
+                f = (s + c) / nsub
+                for i in range(nu):
+                    ui[i] = U[k, i] + du[i] * f
+                    ue[i] = ui[i]
+                for j in range(np_ + 1):
+                    if j == n_pre:
+{assign_generic}
+                        continue
+                    jj = j if j < n_pre else j - 1
+                    kind = progs[jj, 0]
+                    sp = 0
+                    for i in range(progs[jj, 2], progs[jj, 3]):
+                        o = ops[i]
+                        if o < 10:
+                            if o == 0:
+                                v = consts[args[i]]
+                            elif o == 1:
+                                v = xt[args[i]]
+                            elif o == 2:
+                                v = ui[args[i]]
+                            elif o == 3:
+                                v = ue[args[i]]
+                            elif o == 4:
+                                v = pe[args[i]]
+                            elif o == 6:
+                                v = p[args[i]]
+                            else:
+                                v = t
+                            st[sp] = v
+                            sp += 1
+                        elif o < 20:
+                            if o == 15:
+                                st[sp - 1] = -st[sp - 1]
+                                continue
+                            if o == 16:
+                                x = st[sp - 1]
+                                m = args[i]
+                                if m == 2:
+                                    st[sp - 1] = x * x
+                                elif m == 3:
+                                    st[sp - 1] = x * x * x
+                                else:
+                                    y = 1.0
+                                    for _q in range(m):
+                                        y *= x
+                                    st[sp - 1] = y
+                                continue
+                            sp -= 1
+                            x = st[sp - 1]
+                            y = st[sp]
+                            if o == 10:
+                                st[sp - 1] = x + y
+                            elif o == 11:
+                                st[sp - 1] = x - y
+                            elif o == 12:
+                                st[sp - 1] = x * y
+                            elif o == 13:
+                                st[sp - 1] = x / y
+                            else:
+                                st[sp - 1] = x ** y
+                        elif o < 40:
+                            x = st[sp - 1]
+                            if o == 20:
+                                r = np.sin(x)
+                            elif o == 21:
+                                r = np.cos(x)
+                            elif o == 22:
+                                r = np.tan(x)
+                            elif o == 23:
+                                r = np.exp(x)
+                            elif o == 24:
+                                r = np.log(x)
+                            elif o == 25:
+                                r = np.sqrt(x)
+                            elif o == 26:
+                                r = abs(x)
+                            elif o == 27:
+                                r = np.sign(x)
+                            elif o == 28:
+                                r = np.tanh(x)
+                            elif o == 29:
+                                r = np.sinh(x)
+                            elif o == 30:
+                                r = np.cosh(x)
+                            elif o == 31:
+                                r = np.arctan(x)
+                            else:
+                                r = 1.0 if x >= 0.0 else 0.0
+                            st[sp - 1] = r
+                        elif o < 42:
+                            sp -= 1
+                            x = st[sp - 1]
+                            y = st[sp]
+                            st[sp - 1] = min(x, y) if o == 40 else max(x, y)
+                        else:
+                            sp -= 2
+                            st[sp - 1] = min(max(st[sp - 1], st[sp]), st[sp + 1])
+                    val = st[0]
+                    tg = progs[jj, 1]
+                    if kind == 0:
+                        pe[tg] = val
+                    elif kind == 1:
+                        ue[tg] = val
+                    elif kind == 2:
+                        dx[tg] += val
+                    else:
+                        dx[tg] = val
+                for i in range(nx):
+                    K[stage, i] = dx[i]
             for i in range(nx):
-                tmp[i] = xs[i] + 0.5 * h * k1[i]
-            rhs(tmp, um, t + 0.5 * h, p, k2, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
-            for i in range(nx):
-                tmp[i] = xs[i] + 0.5 * h * k2[i]
-            rhs(tmp, um, t + 0.5 * h, p, k3, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
-            for i in range(nx):
-                tmp[i] = xs[i] + h * k3[i]
-            rhs(tmp, ub, t + h, p, k4, pe, ue, st, ops, args, consts, progs, n_prw, n_irw)
-            for i in range(nx):
-                xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                xs[i] += h / 6.0 * (K[0, i] + 2.0 * K[1, i] + 2.0 * K[2, i] + K[3, i])
             if nl > 0:
-                clamp(xs, p, limits)
+                for j in range(nl):
+                    i = limits[j, 0]
+                    if limits[j, 1] >= 0 and xs[i] < p[limits[j, 1]]:
+                        xs[i] = p[limits[j, 1]]
+                    if limits[j, 2] >= 0 and xs[i] > p[limits[j, 2]]:
+                        xs[i] = p[limits[j, 2]]
         for i in range(nx):
             if not (abs(xs[i]) <= bound):
                 for j in range(nx):
@@ -293,6 +270,7 @@ _FUNC_OPS = {"sin": 20, "cos": 21, "tan": 22, "exp": 23, "log": 24, "sqrt": 25, 
              "tanh": 28, "sinh": 29, "cosh": 30, "arctan": 31, "step": 32, "minimum": 40, "maximum": 41,
              "clip": 42}
 PROGRAM_STACK = 64
+POWI_MAX = 8
 
 
 @dataclass
@@ -320,6 +298,13 @@ def _emit(tree: ast.expr, resolve, ops: list, args: list, consts: list) -> int:
         d = _emit(tree.operand, resolve, ops, args, consts)
         if isinstance(tree.op, ast.USub):
             ops.append(15); args.append(0)
+        return d
+    if (isinstance(tree, ast.BinOp) and isinstance(tree.op, ast.Pow) and isinstance(tree.right, ast.Constant)
+            and float(tree.right.value).is_integer() and 1 <= tree.right.value <= POWI_MAX):
+        # x**n for a small whole n: repeated multiplication (op 16), not a pow() call, which is several
+        # times slower and dominated the cost of a cubic term
+        d = _emit(tree.left, resolve, ops, args, consts)
+        ops.append(16); args.append(int(tree.right.value))
         return d
     if isinstance(tree, ast.BinOp):
         d1 = _emit(tree.left, resolve, ops, args, consts)
@@ -403,7 +388,6 @@ def _cache_dir() -> Path:
 
 def kernel_source(model: Model) -> str:
     names = {}
-    unpack = []
     # the nominal equations only (extensions are programs): effective inputs ue, effective params pe
     for i, s in enumerate(model.nominal_states):
         names[s] = f"xs[{i}]"
@@ -412,10 +396,14 @@ def kernel_source(model: Model) -> str:
     for i, p in enumerate(model.nominal_params):
         names[p] = f"pe[{i}]"
     names["t"] = "t"
-    assign = [f"    dx[{i}] = {to_source(model.equations[s], names, scalar=True)}"
-              for i, s in enumerate(model.nominal_states)]
+    rhs = [to_source(model.equations[s], names, scalar=True) for s in model.nominal_states]
+    assign = [f"    dx[{i}] = {r}" for i, r in enumerate(rhs)]
+    # the generic kernel evaluates the stage state xt in place of xs, inside its stage loop
+    stage = {**names, **{s: f"xt[{i}]" for i, s in enumerate(model.nominal_states)}}
+    generic = [f"{' ' * 24}dx[{i}] = {to_source(model.equations[s], stage, scalar=True)}"
+               for i, s in enumerate(model.nominal_states)]
     return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign),
-                            assign2="\n".join("    " + a for a in assign))
+                            assign_generic="\n".join(generic))
 
 
 _LOADED: dict[str, object] = {}
