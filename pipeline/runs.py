@@ -60,7 +60,11 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
             "estimation": {"rmse_sim": rmse(fit.resid_est),
                            "fit_percent": fit_percent(prob.Y[prob.split.est_slice()],
                                                       fit.Yhat[prob.split.est_slice()])},
-            "validation": {"rmse_sim": rmse(r), "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl])},
+            "validation": {"rmse_sim": rmse(r), "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl]),
+                           **({"per_output": {name: {"rmse_sim": rmse(r[:, i]),
+                                                     "fit_percent": fit_percent(prob.Y[sl, i], fit.Yhat[sl, i])}
+                                              for i, name in enumerate(prob.out_names)}}
+                              if r.shape[1] > 1 else {})},
             "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
             "identifiability": fit.identifiability.record() if fit.identifiability else None}
 

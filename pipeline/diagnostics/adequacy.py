@@ -104,10 +104,14 @@ def feedback_test(fit, prob, alpha: float) -> stats.TestResult | None:
 
 
 def where_it_fails(fit, prob, tests: list[stats.TestResult]) -> dict:
-    """Plain facts about the misfit of output 0 on the estimation part."""
+    """Plain facts about the misfit on the estimation part, for the output the model fits worst
+    (largest residual RMS relative to the output's standard deviation)."""
     sl = prob.split.est_slice()
-    e = fit.resid_est[:, 0]
-    y = prob.Y[sl, 0]
+    Y = prob.Y[sl]
+    sd = np.where(np.std(Y, axis=0) > 0, np.std(Y, axis=0), 1.0)
+    worst = int(np.argmax(np.sqrt(np.mean(fit.resid_est ** 2, axis=0)) / sd))
+    e = fit.resid_est[:, worst]
+    y = Y[:, worst]
     n = len(e)
     k = 10
     edges = np.linspace(0, n, k + 1).astype(int)
@@ -125,7 +129,8 @@ def where_it_fails(fit, prob, tests: list[stats.TestResult]) -> dict:
         "time_window_rms_ratio": rms[w] / total,
         "amplitude_range": [float(q[b]), float(q[b + 1])],
         "amplitude_range_rms_ratio": by[b] / total,
-        "note": "estimation part, output " + prob.out_names[0] + "; ratios are the local residual RMS over the "
+        "output": prob.out_names[worst],
+        "note": "estimation part, output " + prob.out_names[worst] + "; ratios are the local residual RMS over the "
                 "whole estimation RMS",
     }
 

@@ -70,8 +70,30 @@ def _log(msg: str) -> None:
 
 
 def val_resid(fit: FitResult, prob: Problem) -> np.ndarray:
+    """(n_val, ny) free-run validation residuals, in the outputs' own units."""
     sl = prob.split.val_slice()
     return prob.Y[sl] - fit.Yhat[sl]
+
+
+def output_scales(prob: Problem) -> np.ndarray:
+    """Per-output scale for pooling: the standard deviation of the measured validation output (1 when
+    it is constant). Fixed by the record, so gains of different iterations are comparable."""
+    s = np.std(prob.Y[prob.split.val_slice()], axis=0)
+    return np.where(s > 0, s, 1.0)
+
+
+def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
+    """The validation residuals a gain is measured on: in the output's units for one output; for
+    several, each output divided by its scale (:func:`output_scales`), so the pooled RMSE is a
+    normalised RMSE and a position in metres is not drowned by a voltage."""
+    r = val_resid(fit, prob)
+    return r if r.shape[1] == 1 else r / output_scales(prob)
+
+
+def _pooled(g: dict, ny: int) -> dict:
+    if ny > 1:
+        g["metric"] = "validation_nrmse_sim_pooled"
+    return g
 
 
 def rmse(r: np.ndarray) -> float:
@@ -88,14 +110,37 @@ def bic_of(fit: FitResult) -> float:
 
 
 def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
-    e = fit.resid_est[:, 0]
+    """The residual battery on every output (and every output × excited input for the
+    cross-correlation). With one output and one input the names are the plain ones (``whiteness``,
+    ``input_crosscorr``…); otherwise they carry ``[y]`` or ``[u->y]``. Returns the tests and the
+    frequency (cycles/sample) of the most significant Fisher-g peak over the outputs."""
     sl = prob.split.est_slice()
-    tests = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha)]
-    if prob.U.shape[1] and np.ptp(prob.U[sl, 0]) > 0:
-        tests.append(stats.input_crosscorr(e, prob.U[sl, 0], 25, alpha))
-    g, f_cyc = stats.fisher_g(e, alpha)
-    tests.append(g)
-    return tests, f_cyc
+    ny = fit.resid_est.shape[1]
+    excited = [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
+    tests, best = [], None
+    for i in range(ny):
+        e = fit.resid_est[:, i]
+        tag = f"[{prob.out_names[i]}]" if ny > 1 else ""
+        rows = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha)]
+        for j in excited:
+            xc = stats.input_crosscorr(e, prob.U[sl, j], 25, alpha)
+            if ny > 1 or len(excited) > 1:
+                xc.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
+            rows.append(xc)
+        g, f_cyc = stats.fisher_g(e, alpha)
+        rows.append(g)
+        for r in rows:
+            if tag and not r.name.endswith("]"):
+                r.name += tag
+        tests += rows
+        if best is None or g.p_value < best[0].p_value:
+            best = (g, f_cyc)
+    return tests, best[1]
+
+
+def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
+    """The Fisher-g row with the smallest p-value (one per output)."""
+    return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
 
 
 def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator, n_boot: int) -> dict:
@@ -226,14 +271,17 @@ class Diagnoser:
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> tuple[list[Candidate], list]:
         ctx = self.context(fit, f_hz)
         out = []
-        for fam in self.families:
-            family = REGISTRY.get(fam)
-            if family is None or family.stage != "structural":
-                continue
-            hyps = family.hypotheses(ctx)
+        fams = [(fam, REGISTRY[fam].hypotheses(ctx)) for fam in self.families
+                if fam in REGISTRY and REGISTRY[fam].stage == "structural"]
+        # the tests are independent simulations: run them in threads (the kernel releases the GIL);
+        # results are collected in the hypotheses' order, so the outcome does not depend on scheduling
+        flat = [h for _, hyps in fams for h in hyps]
+        with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
+            results = dict(zip(map(id, flat), pool.map(lambda h: self.test(fit, h, ctx.X), flat)))
+        for fam, hyps in fams:
             best: Candidate | None = None
             for h in hyps:
-                wr = self.test(fit, h, ctx.X)
+                wr = results[id(h)]
                 if wr is None:
                     continue
                 ev = [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic, "p_value": wr.p_value,
@@ -314,7 +362,7 @@ class Diagnoser:
     def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
         """The ``intersample`` pre-stage (see :mod:`.families.intersample`)."""
         fam = REGISTRY["intersample"]
-        before, bic0 = val_resid(nominal, self.prob), bic_of(nominal)
+        before, bic0 = gain_resid(nominal, self.prob), bic_of(nominal)
         rows, best = [], None
         for chosen, alt in fam.alternatives(nominal.model):
             try:
@@ -323,7 +371,7 @@ class Diagnoser:
                 rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
                              "reason": f"refit failed: {exc}"})
                 continue
-            g = gain_ci(before, val_resid(f, self.prob), rng, self.n_boot)
+            g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
             dbic = bic_of(f) - bic0
             ok = g["ci95"][0] > 0 and dbic < 0
             rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
@@ -346,7 +394,9 @@ class Diagnoser:
 
     @staticmethod
     def _gain_text(g: dict, dbic: float) -> str:
-        return (f"lowers the validation free-run RMSE from {g['before']:.4g} to {g['after']:.4g} "
+        what = ("pooled normalised validation free-run RMSE (each output over its standard deviation)"
+                if g.get("metric") == "validation_nrmse_sim_pooled" else "validation free-run RMSE")
+        return (f"lowers the {what} from {g['before']:.4g} to {g['after']:.4g} "
                 f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
                 f"{100 * g['ci95'][1]:.1f} %) and BIC by {-dbic:.1f}")
 
@@ -362,14 +412,14 @@ class Diagnoser:
         last_r2: dict[str, float] = {}
         for it in range(self.max_findings):
             tests, f_cyc = (tests0, f_cyc0) if current is nominal else residual_tests(current, prob, self.alpha)
-            fisher = next(t for t in tests if t.name == "fisher_g")
+            fisher = strongest_fisher(tests)
             cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
             last_p = {c.hyp.family: c.p_family for c in cands}
             _log(f"iteration {it + 1}: {len(cands)} families tested, fired: "
                  f"{[k for k, v in fired.items() if v] or 'none'}")
             rng = np.random.default_rng([self.seed, it])
-            before = val_resid(current, prob)
+            before = gain_resid(current, prob)
             bic0 = bic_of(current)
             todo = [c for c in cands if fired[c.hyp.family]]
             for c in cands:
@@ -383,7 +433,7 @@ class Diagnoser:
                 if c.fit is None:
                     c.reason = c.reason or "no extension estimated"
                     continue
-                c.gain = gain_ci(before, val_resid(c.fit, prob), rng, self.n_boot)
+                c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
                 c.delta_bic = bic_of(c.fit) - bic0
                 c.accepted = c.gain["ci95"][0] > 0 and c.delta_bic < 0
                 c.reason = "accepted" if c.accepted else (
@@ -420,7 +470,7 @@ class Diagnoser:
             last_p = None
         if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
             tests_f, f_cyc_f = residual_tests(current, prob, self.alpha)
-            cands, _ = self.candidates(current, f_cyc_f / self.dt, next(t for t in tests_f if t.name == "fisher_g"))
+            cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
             last_p = {c.hyp.family: c.p_family for c in cands}
             last_r2 = {c.hyp.family: c.wald.r2 for c in cands}
         adequacy = adequacy_tests(current, prob, self.alpha)

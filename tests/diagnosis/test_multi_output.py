@@ -1,0 +1,114 @@
+"""Issue 8, more than one output and input: residual tests on every output × input, the cause found
+on the output it acts on, and gains pooled over outputs on each output's own scale.
+
+The record is made here with ``scipy.integrate.solve_ivp`` on continuous-time inputs (sums of sines),
+sharing no code with the detector: two coupled thermal capacities,
+
+    T1' = b1 u1 − a1 T1 + g (T2 − T1)          (measured in milli-units: y1 = 1000 T1)
+    T2' = b2 u2 − a2 T2 − g (T2 − T1) + q u2²  (the hidden effect, on the second equation only)
+
+The first output is 1000× larger than the second: a pooled raw RMSE would be output 1's alone. The
+gain must be pooled on each output's scale (its RMSE over the measured output's standard deviation).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from scipy.integrate import solve_ivp
+
+from pipeline.config import load_config
+from pipeline.runs import analyse
+
+A1, A2, G, B1, B2 = 0.5, 0.3, 0.2, 1.0, 0.8
+
+
+def _inputs(t, seed):
+    rng = np.random.default_rng(seed)
+    f1, f2 = rng.uniform(0.01, 0.4, 6), rng.uniform(0.01, 0.4, 6)
+    p1, p2 = rng.uniform(0, 2 * np.pi, 6), rng.uniform(0, 2 * np.pi, 6)
+    u1 = lambda s: 0.5 * np.sum(np.sin(2 * np.pi * f1 * np.asarray(s)[..., None] + p1), axis=-1) / 2
+    u2 = lambda s: 0.5 * np.sum(np.sin(2 * np.pi * f2 * np.asarray(s)[..., None] + p2), axis=-1) / 2
+    return u1, u2
+
+
+def _record(tmp: Path, q: float, seed: int, n: int = 3000, dt: float = 0.05) -> Path:
+    t = np.arange(n) * dt
+    u1, u2 = _inputs(t, seed)
+
+    def f(s, x):
+        T1, T2 = x
+        a, b = u1(s), u2(s)
+        return [B1 * a - A1 * T1 + G * (T2 - T1), B2 * b - A2 * T2 - G * (T2 - T1) + q * b ** 2]
+
+    sol = solve_ivp(f, (0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-9, atol=1e-11, max_step=dt)
+    T1, T2 = sol.y
+    rng = np.random.default_rng(seed + 1)
+    y1 = 1000 * T1 + 0.02 * np.std(1000 * T1) * rng.standard_normal(n)
+    y2 = T2 + 0.02 * np.std(T2) * rng.standard_normal(n)
+    d = tmp / f"mimo-q{q:g}-s{seed}"
+    d.mkdir()
+    pd.DataFrame({"t": t, "u1": u1(t), "u2": u2(t), "y1": y1, "T2": y2}).to_csv(d / "data.csv", index=False)
+    cfg = {
+        "name": "mimo-two-scales", "seed": seed,
+        "data": {"path": "data.csv", "time": "t", "inputs": ["u1", "u2"], "outputs": ["y1", "T2"],
+                 "intersample": "foh", "remove_mean": False},
+        "model": {"states": ["y1", "T2"], "inputs": ["u1", "u2"],
+                  "params": {"a1": 0.45, "a2": 0.35, "g": 0.2, "b1": 1.0, "b2": 0.8},
+                  "free": ["a1", "a2", "g", "b1", "b2"],
+                  "equations": {"y1": "1000*b1*u1 - a1*y1 + g*(1000*T2 - y1)",
+                                "T2": "b2*u2 - a2*T2 - g*(T2 - y1/1000)"},
+                  "initial": {"y1": 0.0, "T2": 0.0}},
+        "split": {"validation_fraction": 0.3},
+        "diagnose": {"families": ["offset", "static_nonlinearity", "input_saturation"], "alpha": 0.01,
+                     "max_findings": 2},
+    }
+    (d / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return d / "config.yaml"
+
+
+def _run(path: Path) -> dict:
+    with contextlib.redirect_stderr(io.StringIO()):
+        return analyse(load_config(path)).summary
+
+
+@pytest.mark.parametrize("seed", [1002, 1003])
+def test_effect_on_the_second_output_is_found_and_its_gain_is_pooled_on_scale(tmp_path, seed):
+    s = _run(_record(tmp_path, q=0.25, seed=seed))
+    names = [r["name"] for r in s["diagnosis"]["tests"]]
+    # every output has its own battery; every output × input pair its cross-correlation
+    for y in ("y1", "T2"):
+        for test in ("autocorrelation", "ljung_box", "fisher_g", "mean_t"):
+            assert f"{test}[{y}]" in names
+        for u in ("u1", "u2"):
+            assert f"input_crosscorrelation[{u}->{y}]" in names
+    rows = {r["name"]: r for r in s["diagnosis"]["tests"]}
+    assert rows["ljung_box[T2]"]["p_value"] < 1e-6          # the second output's own battery sees it
+    first = s["diagnosis"]["findings"][0]
+    assert first["family"] == "static_nonlinearity"
+    assert first["equation"] == "T2" and "u2" in first["term"]
+    g = first["gain"]
+    assert g["metric"] == "validation_nrmse_sim_pooled"
+    assert g["ci95"][0] > 0.05 and g["ci95"][0] <= g["relative"] <= g["ci95"][1]
+    # pooled on scale: √(mean over outputs of (RMSE_i / sd_i)²), sd_i of the measured validation output
+    data = pd.read_csv(tmp_path / f"mimo-q0.25-s{seed}" / "data.csv")
+    a, b = s["data"]["validation"]
+    val = data.iloc[a:b]
+    for key, block in (("before", s["nominal"]), ("after", s["final"])):
+        per = block["validation"]["per_output"]
+        ratios = [per[y]["rmse_sim"] / np.std(val[y]) for y in ("y1", "T2")]
+        assert g[key] == pytest.approx(np.sqrt(np.mean(np.square(ratios))), rel=0.02)
+    per = s["final"]["validation"]["per_output"]
+    assert per["T2"]["rmse_sim"] < 0.7 * s["nominal"]["validation"]["per_output"]["T2"]["rmse_sim"]
+
+
+def test_null_two_output_record_has_no_finding(tmp_path):
+    s = _run(_record(tmp_path, q=0.0, seed=1004))
+    assert [f["family"] for f in s["diagnosis"]["findings"]] == []
+    assert s["diagnosis"]["verdict"] == "no_significant_discrepancy"
