@@ -31,6 +31,7 @@ from ..simulate import simulate_states
 from . import stats
 from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
+from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, structurally_adequate, where_it_fails
 from .noise import diagnose_noise
 
@@ -121,7 +122,9 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
     for i in range(ny):
         e = fit.resid_est[:, i]
         tag = f"[{prob.out_names[i]}]" if ny > 1 else ""
-        rows = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha)]
+        rows = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha),
+                cusum_test(e, Ji := fit.jac[i::ny] if fit.jac is not None else np.zeros((len(e), 0)), prob.t[sl], alpha),
+                cusum_squares_test(e, Ji, prob.t[sl], alpha)]
         for j in excited:
             xc = stats.input_crosscorr(e, prob.U[sl, j], 25, alpha)
             if ny > 1 or len(excited) > 1:
