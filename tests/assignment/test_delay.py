@@ -99,7 +99,7 @@ def delay_graded(delay_class, tmp_path_factory):
     d_key = st["parameters"]["delay_s"]
     claimed = pipeline_gain(out / "students" / "d01" / "config.yaml")
     res = {}
-    for name, delay in (("right", d_key), ("off5", d_key + 5 * DT)):
+    for name, delay in (("right", d_key), ("off2", d_key - 2 * DT), ("off5", d_key + 5 * DT)):
         subs = tmp_path_factory.mktemp(f"subs_{name}")
         _submit(out, subs, st, delay, claimed)
         g = tmp_path_factory.mktemp(f"grade_{name}")
@@ -136,6 +136,19 @@ def test_delay_off_by_five_samples_loses_the_parameter_points(delay_graded):
     expected = 40 + 30 * v + 10 * (r["gain_reproduces"] == "yes")
     assert float(r["score"]) == pytest.approx(expected, abs=0.05)
     assert float(r["score"]) < float(res["right"]["d01"]["score"]) - 19.9
+
+
+def test_delay_tolerance_is_in_samples(delay_graded):
+    """Two samples off: share 2 - 2 / 1.5 = 2/3 of the parameter's 20 points (a relative tolerance of
+    0.25 would give 2 - 0.447 / 0.25 = 0.21 of them)."""
+    key, res = delay_graded
+    st = _student(key, "d01")
+    r = res["off2"]["d01"]
+    nom, stu, truth = float(r["heldout_rmse_nominal"]), float(r["heldout_rmse"]), st["heldout_rmse_truth"]
+    v = min(1.0, max(0.0, (nom - stu) / (nom - truth) / 0.8))
+    expected = 40 + 20 * (2 - 2 / 1.5) + 30 * v + 10 * (r["gain_reproduces"] == "yes")
+    assert float(r["score"]) == pytest.approx(expected, abs=0.05)
+    assert "2.0 samples" in r["reason"]
 
 
 def test_delay_answer_without_model_input_delay_is_a_row_with_the_reason(delay_class, tmp_path):
