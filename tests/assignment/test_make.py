@@ -22,7 +22,7 @@ from .conftest import ROSTER, TEMPLATE
 # parameters the diagnosis contract §2 lists for each family
 CONTRACT_KEYS = {"offset": {"coefficient"}, "output_offset": {"value"}, "cubic_stiffness": {"coefficient", "term"},
                  "quadratic_damping": {"coefficient", "term"}, "coulomb_friction": {"coefficient", "term"},
-                 "periodic_disturbance": {"frequency_hz", "amplitude"}}
+                 "periodic_disturbance": {"frequency_hz", "amplitude"}, "input_delay": {"delay_s"}}
 
 
 def _sha(p: Path) -> str:
