@@ -150,7 +150,7 @@ def generate(system: str, effect: str, seed: int, *, n: int = 3000, noise: float
         m = m.extend([Term(effect, "sin", eq, "h_a", freq="h_f")], {"h_a": a, "h_f": f})
         truth.update(frequency_hz=f, amplitude=a)
     elif effect == "input_delay":
-        d = 5 * dt
+        d = 5 * dt * strength                       # strength 1: five samples of dead time
         m = m.extend([], {"h_d": d}, delay="h_d")
         truth.update(delay_s=d, equation=None)
     elif effect == "output_offset":

@@ -1,7 +1,10 @@
 """Commands ``sysid assignment make`` and ``sysid grade`` (registered via ``pipeline.cli.COMMAND_MODULES``).
 
 ``sysid assignment make --roster roster.csv --template T.yaml --out DIR [--seed S]``
-``sysid grade --key DIR/key.json --submissions SUBS [--out gradebook.csv] [--jobs N] [--runs DIR] [--html PAGE]``
+``sysid grade --key DIR/key.json --submissions SUBS [--out gradebook.csv] [--jobs N] [--executor local|dask]
+[--runs DIR] [--html PAGE]``
+
+The submissions run on the executors of ``sysid batch`` (:mod:`pipeline.batch`).
 
 The instructor's own bad input (roster, template, key, options) raises InputError: exit 2, one line.
 Bad submissions are rows of the gradebook with the reason.
@@ -34,7 +37,7 @@ def _grade(args: argparse.Namespace) -> int:
         raise InputError("the gradebook and the summary page must be different files", key="--html")
     check_writable(out, HEADER, "--out")
     check_writable(page, FIRST_LINE, "--html")
-    key, rows = grade(args.key, args.submissions, jobs=args.jobs, runs_dir=runs)
+    key, rows = grade(args.key, args.submissions, jobs=args.jobs, executor=args.executor, runs_dir=runs)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(gradebook_csv(rows), encoding="utf-8")
     page.parent.mkdir(parents=True, exist_ok=True)
@@ -65,6 +68,8 @@ def register(subparsers) -> dict:
     g.add_argument("--submissions", required=True, help="folder with one <student id>/ folder per submission")
     g.add_argument("--out", default="gradebook.csv", help="gradebook CSV (default gradebook.csv)")
     g.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (default 1)")
+    g.add_argument("--executor", default="local", help="local (process pool, default) or dask (a Dask "
+                   "LocalCluster of --jobs workers; needs the [dask] extra), as in sysid batch")
     g.add_argument("--runs", default=None, help="folder for the run folders (default: runs/ beside --out)")
     g.add_argument("--html", default=None, help="summary page (default: summary.html beside --out)")
     return {"assignment": _assignment, "grade": _grade}

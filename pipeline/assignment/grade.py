@@ -4,9 +4,10 @@ Nothing a student claims is trusted. For each student of the key (sorted by id):
 
 1. The submission folder is validated (:mod:`.submission`); a missing or broken one gets a row with
    the reason (status ``missing`` / ``invalid`` / ``failed``), never a crash.
-2. The student's config is run by the pipeline (``runs.analyse`` + ``runs.write_run``): the run folder
-   ``runs/<id>/`` with its report, and the run id. The config's model is fitted by output error on
-   the student's record; the data file's sha256 is compared with the key's.
+2. The student's config is run by the pipeline through :func:`pipeline.batch.run_one` (the same
+   ``runs.analyse`` + ``runs.write_run`` as ``sysid batch``): the run folder ``runs/<id>/`` with its
+   report, and the run id; the grade reads that run's ``summary.json``. The config's model is fitted
+   by output error on the student's record; the data file's sha256 is compared with the key's.
 3. The fitted model is simulated (free run, from sample 0 and the fitted initial state) over the
    instructor's whole record; its RMSE on the held-out part (after the issued samples) is the
    validation error. The starter model is fitted the same way (``fit.fit_output_error`` on the same
@@ -20,7 +21,15 @@ Nothing a student claims is trusted. For each student of the key (sorted by id):
    ``hypot(a_sin, a_cos)`` of the projection on sin and cos at the key's frequency; for an output offset
    the mean change of the measured output). This makes the comparison independent of how the student
    wrote the term (sign, name, a division by a fixed mass). ``parameter_rel_error = |c - c_key| / |c_key|``.
+   For an input delay the size is the config's ``model.input_delay`` (seconds; 0 when absent): the
+   gradebook shows the relative error, and the rubric scores the error in samples,
+   ``|d - d_key| / dt``, against ``rubric.delay_tolerance_samples`` (1.5 samples, the diagnosis
+   contract's accuracy of a found delay).
 6. The score (:mod:`.rubric`).
+
+The submissions are graded on the executors of ``sysid batch`` (:func:`pipeline.batch.run_tasks`:
+in this process for ``--jobs 1``, else a spawned process pool of ``--jobs`` workers, or a Dask
+``LocalCluster`` with ``--executor dask``); each task is one student, :func:`grade_one`.
 
 Same inputs give a byte-identical gradebook on any machine and for any ``--jobs``: rows sorted by id,
 fixed float formats, no times and no absolute paths (messages name files relative to the submissions
@@ -35,13 +44,14 @@ import io
 import json
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from .. import batch
 from ..config import LoadedConfig, load_config
 from ..data import Split, file_sha256, load_record, make_split
 from ..errors import InputError, SimulationError
@@ -153,6 +163,8 @@ def _on_record(lc: LoadedConfig, path: Path) -> LoadedConfig:
 def cause_size(model: Model, param: str, st: KeyStudent, t: np.ndarray, U: np.ndarray, X: np.ndarray,
                out_name: str | None) -> float:
     """The size of the key's cause in the student's fitted model (module docstring, step 5)."""
+    if param not in model.params:
+        return math.nan
     m0 = model.with_params({param: 0.0})
     fam, p = st.family, st.parameters
     if fam == "output_offset":
@@ -199,15 +211,10 @@ def _split_of(summary: dict, lc: LoadedConfig, n: int) -> tuple[tuple[int, int],
     return s.est, s.val
 
 
-def _grade_submission(task: Task, sub: Submission) -> dict:
-    from ..runs import analyse, write_run
+def _grade_submission(task: Task, sub: Submission, summary: dict, run_id: str) -> dict:
+    """The row of a submission whose pipeline run gave ``summary`` (its summary.json)."""
     st, tpl = task.student, task.template
     lc = sub.config
-    ctx = analyse(lc)
-    run_id = ctx.run_id
-    if task.runs_dir is not None:
-        write_run(ctx, task.runs_dir / st.id, html=True)
-    summary = ctx.summary
     data_issued = summary.get("data_sha256") == st.data_sha256
     fitted = {k: float(v) for k, v in summary["nominal"]["params"].items()}
     n, nh = st.issued_samples, st.heldout_samples
@@ -250,18 +257,27 @@ def _grade_submission(task: Task, sub: Submission) -> dict:
     # size of the cause along the fitted model's trajectory on the issued part
     out_col = st.acts_on.split(" ", 1)[1] if st.family == "output_offset" else None
     out_name = lc_full.output_map.get(out_col) if out_col else None
-    sim = simulate_states(model, prob.t[:n], prob.U[:n], x0, bound=prob.bound)
-    if sim.diverged_at is None:
-        size = cause_size(model, sub.answer.parameter, st, prob.t[:n], prob.U[:n], sim.X, out_name)
-    else:
-        size = math.nan
     ref = float(st.parameters[st.main_parameter])
+    tolerance = score_error = None
+    if st.family == "input_delay":
+        size = float(lc.cfg.model.input_delay or 0.0)
+        score_error, tolerance = abs(size - ref) / rec.dt, tpl.rubric.delay_tolerance_samples
+        if cause_ok and score_error > tolerance:
+            notes.append(f"input delay {size:.4g} s is {score_error:.1f} samples from the key's "
+                         f"(tolerance {tolerance:g})")
+    else:
+        sim = simulate_states(model, prob.t[:n], prob.U[:n], x0, bound=prob.bound)
+        if sim.diverged_at is None:
+            size = cause_size(model, sub.answer.parameter, st, prob.t[:n], prob.U[:n], sim.X, out_name)
+        else:
+            size = math.nan
     if st.family == "periodic_disturbance":
         ref = abs(ref)
     perr = abs(size - ref) / abs(ref) if math.isfinite(size) and ref != 0 else math.nan
     share = rubric.validation_share(ho_n, ho_s, st.heldout_rmse_truth)
-    items = rubric.shares(tpl.rubric, cause_correct=cause_ok, parameter_error=perr, validation=share,
-                          gain_reproduces=reproduces)
+    items = rubric.shares(tpl.rubric, cause_correct=cause_ok,
+                          parameter_error=perr if score_error is None else score_error, validation=share,
+                          gain_reproduces=reproduces, tolerance=tolerance)
     total = rubric.score(tpl.rubric, items, data_issued)
     if not data_issued:
         notes.insert(0, "the data file is not the one issued (sha256 differs)")
@@ -280,8 +296,20 @@ def _grade_submission(task: Task, sub: Submission) -> dict:
     return row
 
 
+def _run(task: Task, sub: Submission, root: Path) -> dict:
+    """Run the submission's config with :func:`pipeline.batch.run_one` into ``root/<id>`` and grade it."""
+    st = task.student
+    res = batch.run_one(str(sub.config.path), str(root), html=task.runs_dir is not None, name=st.id)
+    if not res.ok:
+        status = "invalid" if res.kind == "input" else "failed"
+        return _empty_row(st, status, _relative(res.error or "", task.submissions, task.key_dir))
+    summary = json.loads((Path(res.path) / "summary.json").read_text(encoding="utf-8"))
+    return _grade_submission(task, sub, summary, res.run_id or "")
+
+
 def grade_one(task: Task) -> dict:
-    """One gradebook row; never raises (missing/broken submissions give a row with the reason)."""
+    """One gradebook row; never raises (missing/broken submissions give a row with the reason).
+    The run folder goes to ``task.runs_dir/<id>``, or to a temporary folder when it is None."""
     st = task.student
     folder = task.submissions / st.id
     if not folder.is_dir():
@@ -289,7 +317,10 @@ def grade_one(task: Task) -> dict:
     try:
         with contextlib.redirect_stderr(io.StringIO()):
             sub = load_submission(folder)
-            return _grade_submission(task, sub)
+            if task.runs_dir is not None:
+                return _run(task, sub, task.runs_dir)
+            with tempfile.TemporaryDirectory(prefix="sysid-grade-") as tmp:
+                return _run(task, sub, Path(tmp))
     except InputError as exc:
         return _empty_row(st, "invalid", _relative(str(exc), task.submissions, task.key_dir))
     except Exception as exc:  # an internal failure on one submission must not stop the class
@@ -327,23 +358,23 @@ def gradebook_csv(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def grade(key_path: str | Path, submissions: str | Path, *, jobs: int = 1,
+def grade(key_path: str | Path, submissions: str | Path, *, jobs: int = 1, executor: str = "local",
           runs_dir: str | Path | None = None) -> tuple[KeyFile, list[dict]]:
-    """Grade every student of the key; rows sorted by student id."""
+    """Grade every student of the key on the ``sysid batch`` executors; rows sorted by student id."""
+    if jobs < 1:
+        raise InputError(f"must be at least 1, got {jobs}", key="--jobs")
+    batch.check_options(jobs, executor, None)
     key, key_dir = load_key(key_path)
     subs = Path(submissions)
     if not subs.is_dir():
         raise InputError("submissions folder not found", file=str(subs), key="--submissions")
-    if jobs < 1:
-        raise InputError(f"must be at least 1, got {jobs}", key="--jobs")
     runs = Path(runs_dir) if runs_dir is not None else None
     if runs is not None:
         check_runs_dir(runs, [s.id for s in key.students])
         runs.mkdir(parents=True, exist_ok=True)
-    tasks = [Task(s, key_dir, subs, runs, key.template) for s in sorted(key.students, key=lambda s: s.id)]
-    if jobs == 1 or len(tasks) == 1:
-        rows = [grade_one(t) for t in tasks]
-    else:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as ex:
-            rows = list(ex.map(grade_one, tasks))
+    # absolute folders: the workers of a process pool or a Dask cluster may run elsewhere
+    runs = runs.resolve() if runs is not None else None
+    tasks = [Task(s, key_dir.resolve(), subs.resolve(), runs, key.template)
+             for s in sorted(key.students, key=lambda s: s.id)]
+    rows = batch.run_tasks(grade_one, tasks, jobs=min(jobs, len(tasks)), executor=executor)
     return key, sorted(rows, key=lambda r: r["student_id"])

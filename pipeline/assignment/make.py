@@ -51,7 +51,8 @@ SYSTEM_TEXT = {
     "dcmotor": "DC motor (input u: voltage, output w: speed)",
 }
 MAIN_PARAMETER = {"offset": "coefficient", "cubic_stiffness": "coefficient", "quadratic_damping": "coefficient",
-                  "coulomb_friction": "coefficient", "periodic_disturbance": "amplitude", "output_offset": "value"}
+                  "coulomb_friction": "coefficient", "periodic_disturbance": "amplitude", "output_offset": "value",
+                  "input_delay": "delay_s"}
 CSV_FORMAT = "%.10g"
 
 
@@ -73,6 +74,8 @@ def draw(tpl: Template, seed: int, student_id: str) -> tuple[str, float, int]:
 
 
 def _acts_on(truth: dict) -> str:
+    if truth["family"] == "input_delay":
+        return "input u"
     return f"output {truth['output']}" if truth["family"] == "output_offset" else str(truth["equation"])
 
 
@@ -102,6 +105,8 @@ def make_student(tpl: Template, seed: int, st: Student, out: Path) -> dict:
     held = slice(n, n + nh)
     truth = dict(syn.truth)
     params = {k: v for k, v in truth.items() if k not in ("family", "equation", "noise", "output")}
+    if family == "input_delay":  # the key stores the delay in seconds; in samples for the instructor
+        params["delay_samples"] = params["delay_s"] / synthetic.BASE[tpl.system]["dt"]
     return {
         "id": st.id, "name": st.name, "family": family, "acts_on": _acts_on(truth),
         "parameters": params, "main_parameter": MAIN_PARAMETER[family], "strength": strength,

@@ -6,6 +6,9 @@ Each item is a share in [0, 1]; the score is ``100 * sum(w_i * share_i) / sum(w_
 * ``parameter``: 0 unless the cause is right; with the relative error
   ``e = |c_student - c_key| / |c_key|`` of the cause's size (see :func:`pipeline.assignment.grade`),
   ``clip(2 - e / parameter_tolerance, 0, 1)``: full marks up to the tolerance, none at twice it.
+  For an input delay the error is in samples, ``e = |d_student - d_key| / dt``, and the tolerance is
+  ``delay_tolerance_samples`` (default 1.5 samples: the accuracy the diagnosis contract asks of a
+  found delay), scored the same way.
 * ``validation``: with the held-out free-run RMSE of the refitted starter model (``nominal``), of the
   student's refitted model (``student``) and of the noise-free truth (``truth``, the measurement noise
   alone), the share of the achievable improvement ``s = (nominal - student) / (nominal - truth)``,
@@ -38,11 +41,13 @@ def validation_share(nominal: float, student: float, truth: float) -> float:
 
 
 def shares(r: Rubric, *, cause_correct: bool, parameter_error: float, validation: float,
-           gain_reproduces: bool) -> dict[str, float]:
-    """The share of each rubric item (see the module docstring)."""
+           gain_reproduces: bool, tolerance: float | None = None) -> dict[str, float]:
+    """The share of each rubric item (see the module docstring); ``tolerance`` replaces
+    ``r.parameter_tolerance`` (the input delay's error is in samples)."""
+    tol = r.parameter_tolerance if tolerance is None else tolerance
     p = 0.0
     if cause_correct and math.isfinite(parameter_error):
-        p = clip01(2.0 - parameter_error / r.parameter_tolerance)
+        p = clip01(2.0 - parameter_error / tol)
     v = clip01(validation / r.validation_target) if math.isfinite(validation) else 0.0
     return {"cause": 1.0 if cause_correct else 0.0, "parameter": p, "validation": v,
             "gain": 1.0 if gain_reproduces else 0.0}

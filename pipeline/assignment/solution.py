@@ -10,6 +10,7 @@ system's position and velocity states of :data:`pipeline.synthetic.BASE`)::
     coulomb_friction      d(eq)/dt = nominal + p_fix*sign(vel)
     periodic_disturbance  d(eq)/dt = nominal + p_fix*sin(2*pi*p_freq*t)   (p_freq starts at ``frequency_hz``)
     output_offset         measured = output state + p_fix   (a declared output ``<output>_meas``)
+    input_delay           model.input_delay: delay_s (a known dead time, seconds; parameter "input_delay")
 """
 
 from __future__ import annotations
@@ -20,13 +21,18 @@ import math
 from ..synthetic import BASE
 
 PARAM = "p_fix"
+DELAY_PARAM = "input_delay"   # the name an answer gives the config's model.input_delay
 
 
-def extend_config(starter: dict, system: str, family: str, frequency_hz: float = 1.0) -> tuple[dict, str]:
+def extend_config(starter: dict, system: str, family: str, frequency_hz: float = 1.0,
+                  delay_s: float = 0.0) -> tuple[dict, str]:
     """A copy of ``starter`` (a config mapping) extended by ``family``; returns (config, parameter name)."""
     b = BASE[system]
     cfg = copy.deepcopy(starter)
     model = cfg["model"]
+    if family == "input_delay":
+        model["input_delay"] = float(delay_s)
+        return cfg, DELAY_PARAM
     eq = b["states"][-1]
     params = dict(model["params"])
     free = list(model["free"])

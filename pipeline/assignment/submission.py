@@ -14,7 +14,9 @@ A submission is one folder per student, named by the student id, under the submi
     parameter: k3            # the free parameter of config.yaml that sizes the cause: the coefficient of
                              # the added term (offset, cubic_stiffness, quadratic_damping,
                              # coulomb_friction), the amplitude (periodic_disturbance) or the offset
-                             # of the measured output (output_offset)
+                             # of the measured output (output_offset); for input_delay the word
+                             # input_delay (or model.input_delay): the config's model.input_delay
+                             # (the dead time in seconds, fixed)
     claimed_gain: 0.62       # relative validation gain 1 - RMSE(your model) / RMSE(starter model), free-run
                              # simulation, on the validation part of your record as your config splits it
     comment: "optional free text"
@@ -37,6 +39,8 @@ from ..errors import InputError
 from .template import read_yaml_mapping, validation_message
 
 CONFIG_FILE = "config.yaml"
+# answer.parameter naming the config's model.input_delay (the student README does not name it: no hint)
+DELAY_ANSWERS = ("input_delay", "model.input_delay")
 ANSWER_FILE = "answer.yaml"
 
 
@@ -95,7 +99,11 @@ def load_submission(folder: Path) -> Submission:
     if lc.cfg.data.remove_mean:
         raise InputError("remove_mean is not allowed in a submission (the held-out record is scored raw)",
                          file=str(cfg_path), key="data.remove_mean")
-    if answer.parameter not in lc.cfg.model.free:
+    if answer.parameter in DELAY_ANSWERS and answer.parameter not in lc.cfg.model.free:
+        if lc.cfg.model.input_delay is None:
+            raise InputError(f"{answer.parameter} names model.input_delay, which {CONFIG_FILE} does not set",
+                             file=str(ans_path), key="parameter")
+    elif answer.parameter not in lc.cfg.model.free:
         raise InputError(f"{answer.parameter!r} is not a free parameter of {CONFIG_FILE} "
                          f"(model.free: {', '.join(lc.cfg.model.free) or 'none'})", file=str(ans_path),
                          key="parameter")
@@ -120,7 +128,7 @@ Hand in this folder with `config.yaml` (your extended model), `record.csv` uncha
 
 ```yaml
 cause: <family id>
-parameter: <the free parameter of config.yaml that sizes the cause>
+parameter: <the free parameter of config.yaml that sizes the cause, or the model setting that states it>
 claimed_gain: <1 - RMSE(your model) / RMSE(starter model) on your validation part>
 ```
 

@@ -14,6 +14,7 @@ families:                      # hidden effects that may be drawn, each with its
 rubric:                        # see pipeline.assignment.rubric for the score
   weights: {cause: 40, parameter: 20, validation: 30, gain: 10}
   parameter_tolerance: 0.25
+  delay_tolerance_samples: 1.5 #   input_delay: |delay error| in samples with full marks
   validation_target: 0.8
   gain_tolerance: 0.05
   require_issued_data: true
@@ -34,10 +35,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from ..errors import InputError
 from ..synthetic import BASE
 
-# families a student can write as an extension of the starter config (input_delay needs a delay key
-# in the config, which this branch's schema does not have)
+# families a student can write as an extension of the starter config (input_delay as model.input_delay;
+# its strength 1 is a dead time of five samples)
 GRADABLE_FAMILIES = ("offset", "output_offset", "cubic_stiffness", "quadratic_damping", "coulomb_friction",
-                     "periodic_disturbance")
+                     "periodic_disturbance", "input_delay")
 
 
 class _Strict(BaseModel):
@@ -62,6 +63,7 @@ class RubricWeights(_Strict):
 class Rubric(_Strict):
     weights: RubricWeights = Field(default_factory=RubricWeights)
     parameter_tolerance: float = Field(default=0.25, gt=0, le=10)   # relative error with full marks
+    delay_tolerance_samples: float = Field(default=1.5, gt=0, le=100)  # input_delay: error in samples
     validation_target: float = Field(default=0.8, gt=0, le=1)       # share of the achievable gain for full marks
     gain_tolerance: float = Field(default=0.05, gt=0, le=1)         # |claimed - measured| that reproduces
     require_issued_data: bool = True                                # a data file not issued scores 0
@@ -81,9 +83,6 @@ class Template(_Strict):
     @classmethod
     def _families(cls, v: dict[str, tuple[float, float]]):
         for fam, (lo, hi) in v.items():
-            if fam == "input_delay":
-                raise ValueError("input_delay cannot be graded yet: a student config has no key for an input "
-                                 f"delay; gradable: {', '.join(GRADABLE_FAMILIES)}")
             if fam not in GRADABLE_FAMILIES:
                 raise ValueError(f"unknown or ungradable family {fam!r}; gradable: {', '.join(GRADABLE_FAMILIES)}")
             if not (0 < lo <= hi <= 5):

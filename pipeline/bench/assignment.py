@@ -50,7 +50,8 @@ def _submissions(klass: Path, subs: Path) -> None:
         shutil.copytree(klass / "students" / s["id"], d)
         fam = s["family"] if i < 24 or i >= 27 else next(f for f in fams if f != s["family"])
         starter = yaml.safe_load((d / "config.yaml").read_text())
-        cfg, p = extend_config(starter, key["template"]["system"], fam, s["parameters"].get("frequency_hz", 1.0))
+        cfg, p = extend_config(starter, key["template"]["system"], fam, s["parameters"].get("frequency_hz", 1.0),
+                               delay_s=s["parameters"].get("delay_s", 0.0))
         (d / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
         answer = {"cause": "friction" if i == 29 else fam, "parameter": p, "claimed_gain": gain}
         (d / "answer.yaml").write_text(yaml.safe_dump(answer))

@@ -42,7 +42,8 @@ def write_submission(klass_dir: Path, subs: Path, st: dict, family: str, claimed
     d = subs / st["id"]
     shutil.copytree(klass_dir / "students" / st["id"], d)
     starter = yaml.safe_load((d / "config.yaml").read_text())
-    cfg, param = extend_config(starter, "msd", family, st["parameters"].get("frequency_hz", 1.0))
+    cfg, param = extend_config(starter, "msd", family, st["parameters"].get("frequency_hz", 1.0),
+                               delay_s=st["parameters"].get("delay_s", 0.0))
     (d / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     (d / "answer.yaml").write_text(yaml.safe_dump({"cause": family, "parameter": param, "claimed_gain": claimed}))
     return d

@@ -151,3 +151,24 @@ def test_foreign_gradebook_is_not_overwritten(klass, submissions, tmp_path, caps
     rc = main(["grade", "--key", str(klass[0] / "key.json"), "--submissions", str(submissions[0]),
                "--out", str(tmp_path / "x.csv"), "--jobs", "0"])
     assert rc == 2
+
+
+def test_dask_executor_gives_the_same_gradebook(klass, submissions, graded, tmp_path):
+    """`sysid grade --executor dask` (a Dask LocalCluster, the sysid batch executor): the same bytes."""
+    pytest.importorskip("distributed")
+    out, _ = klass
+    rc = main(["grade", "--key", str(out / "key.json"), "--submissions", str(submissions[0]), "--out",
+               str(tmp_path / "gradebook.csv"), "--jobs", "2", "--executor", "dask"])
+    assert rc == 0
+    assert (tmp_path / "gradebook.csv").read_bytes() == (graded[1] / "gradebook.csv").read_bytes()
+    for sid in ("s01", "s02", "s03", "s04"):
+        assert ((tmp_path / "runs" / sid / "summary.json").read_bytes()
+                == (graded[1] / "runs" / sid / "summary.json").read_bytes())
+
+
+def test_unknown_executor_exits_2(klass, submissions, tmp_path, capsys):
+    rc = main(["grade", "--key", str(klass[0] / "key.json"), "--submissions", str(submissions[0]),
+               "--out", str(tmp_path / "g.csv"), "--executor", "slurm"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("error: ") and "--executor" in err and "slurm" in err
+    assert not (tmp_path / "g.csv").exists()

@@ -22,7 +22,7 @@ from .conftest import ROSTER, TEMPLATE
 # parameters the diagnosis contract §2 lists for each family
 CONTRACT_KEYS = {"offset": {"coefficient"}, "output_offset": {"value"}, "cubic_stiffness": {"coefficient", "term"},
                  "quadratic_damping": {"coefficient", "term"}, "coulomb_friction": {"coefficient", "term"},
-                 "periodic_disturbance": {"frequency_hz", "amplitude"}}
+                 "periodic_disturbance": {"frequency_hz", "amplitude"}, "input_delay": {"delay_s"}}
 
 
 def _sha(p: Path) -> str:
@@ -138,7 +138,8 @@ def test_bad_roster_exits_2_with_one_line(tmp_path, capsys, roster, needle):
 
 
 @pytest.mark.parametrize("edit, needle", [
-    ("families: {input_delay: [1, 1]}", "input_delay cannot be graded"),
+    ("families: {input_saturation: [1, 1]}", "unknown or ungradable family 'input_saturation'"),
+    ("rubric: {delay_tolerance_samples: 0}", "rubric.delay_tolerance_samples"),
     ("families: {spring: [1, 1]}", "unknown or ungradable family 'spring'"),
     ("families: {offset: [1.5, 1.0]}", "0 < low <= high <= 5"),
     ("families: {}", "families"),

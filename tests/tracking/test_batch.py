@@ -52,3 +52,16 @@ def test_dask_local_cluster_gives_byte_identical_summaries(batch_runs, tmp_path)
     for r in (res[0], res[2]):
         for f in ("summary.json", "metrics.json", "params.yaml"):
             assert (Path(r.path) / f).read_bytes() == (local[r.run_id] / f).read_bytes(), f
+
+
+def test_run_tasks_keeps_input_order_on_every_executor():
+    """The generic executor path `sysid grade` uses: any picklable callable, results in input order."""
+    from pipeline.batch import run_tasks
+    from pipeline.errors import InputError
+    items = [-3, 1, -2, 5, -4]
+    assert run_tasks(abs, items, jobs=1) == [3, 1, 2, 5, 4]
+    assert run_tasks(abs, items, jobs=2) == [3, 1, 2, 5, 4]
+    assert run_tasks(abs, [], jobs=2) == []
+    for kw in ({"jobs": 0}, {"executor": "slurm"}, {"scheduler": "tcp://x:1"}):
+        with pytest.raises(InputError):
+            run_tasks(abs, items, **kw)
