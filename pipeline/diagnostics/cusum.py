@@ -27,8 +27,8 @@ long-run variance ω² of w² (Sansó, Aragó & Carrion 2004, κ₂; Inclán & T
 case ω² = 2σ⁴) the statistic max_r |Σ_{k+1}^{r} (w_j² − mean w²)| / √((T−k) ω²) has the Kolmogorov
 distribution (sup of a Brownian bridge) under a constant structure.
 
-The recursion uses the Sherman–Morrison update of (XᵀX)⁻¹ and starts after k = max(2p, 1 % of T)
-rows, solved directly, so an ill-conditioned start of a smooth Jacobian does not dominate.
+The recursion uses the Sherman–Morrison update of (XᵀX)⁻¹ on an orthonormal basis of the Jacobian's
+columns and starts after k = max(2p, 1 % of T) rows, solved directly with a nearly diffuse prior.
 """
 
 from __future__ import annotations
@@ -74,15 +74,21 @@ def recursive_residuals(e: np.ndarray, X: np.ndarray, k: int | None = None) -> t
     residuals do not depend on the scaling)."""
     e = np.ascontiguousarray(e, float)
     X = np.asarray(X, float).reshape(len(e), -1)
-    norms = np.linalg.norm(X, axis=0)
-    X = np.ascontiguousarray(X[:, norms > 0] / norms[norms > 0])
-    n, p = X.shape
+    n = len(e)
+    # an orthonormal basis of the column space (the residuals are invariant to an invertible change
+    # of the columns; collinear sensitivities are dropped)
+    if X.shape[1]:
+        Uq, sv, _ = np.linalg.svd(X, full_matrices=False)
+        X = np.ascontiguousarray(Uq[:, sv > 1e-10 * sv[0]]) if sv[0] > 0 else np.zeros((n, 0))
+    p = X.shape[1]
     if k is None:
         k = max(2 * p, n // 100, 1)
     if p == 0:
         return e[k:].copy(), k
     A = X[:k]
-    P = np.linalg.pinv(A.T @ A)
+    # a nearly diffuse prior (ridge 1e-9 of the whole record's XᵀX = I) keeps (XᵀX)⁻¹ defined when a
+    # sensitivity is still zero at the start (a parameter that acts only later, a limit not yet reached)
+    P = np.linalg.inv(A.T @ A + 1e-9 * np.eye(p))
     b = P @ (A.T @ e[:k])
     return _recursive(e, X, k, np.ascontiguousarray(P), b), k
 
@@ -98,8 +104,9 @@ def cusum_test(e: np.ndarray, X: np.ndarray, t: np.ndarray | None = None, alpha:
     where the cumulative sum is furthest outside (or closest to) its bound."""
     w, k = recursive_residuals(e, X)
     m = len(w)
-    if m < 20:
-        return stats.TestResult("cusum", float("nan"), 1.0, None, True, "too few samples for the CUSUM test")
+    if m < 20 or not np.all(np.isfinite(w)):
+        return stats.TestResult("cusum", float("nan"), float("nan"), None, True,
+                                "not computed: too few samples or a non-finite recursion")
     sd = math.sqrt(max(float(stats.long_run_variance(w[:, None])[0, 0]) / m, 0.0)) or 1.0   # Ω is a sum over rows
     W = np.cumsum(w - 0.0) / sd
     r = np.arange(1, m + 1)
@@ -134,8 +141,9 @@ def cusum_squares_test(e: np.ndarray, X: np.ndarray, t: np.ndarray | None = None
     from scipy.stats import kstwobign
     w, k = recursive_residuals(e, X)
     m = len(w)
-    if m < 20:
-        return stats.TestResult("cusum_squares", float("nan"), 1.0, None, True, "too few samples")
+    if m < 20 or not np.all(np.isfinite(w)):
+        return stats.TestResult("cusum_squares", float("nan"), float("nan"), None, True,
+                                "not computed: too few samples or a non-finite recursion")
     z = w ** 2
     d = z - z.mean()
     om = float(stats.long_run_variance(d[:, None])[0, 0]) / m

