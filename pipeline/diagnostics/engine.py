@@ -31,6 +31,7 @@ from ..simulate import simulate_states
 from . import stats
 from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
+from .families.base import Family
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, structurally_adequate, where_it_fails
 from .noise import diagnose_noise
@@ -230,10 +231,24 @@ class Diagnoser:
     def hyp_model(self, fit: FitResult, hyp: Hypothesis, values: dict[str, float] | None = None) -> Model:
         return REGISTRY[hyp.family].extend(fit.model, hyp, values)
 
+    @staticmethod
+    def _null_is_current(hyp: Hypothesis) -> bool:
+        """The hypothesis at its null is the current model itself: additive terms whose coefficients
+        are 0 there, added by the generic extension (no rewrite, limit or new state). Its simulation
+        at the null is then the fit's own, and the test needs one simulation per coefficient."""
+        fam = REGISTRY[hyp.family]
+        coefs = {t.coef for t in hyp.terms}
+        return (type(fam).extend is Family.extend and not hyp.input_rewrites and not hyp.param_rewrites
+                and not hyp.limits and not hyp.extra_states and all(c in coefs for c in hyp.coefs)
+                and all(float(hyp.null.get(c, 0.0)) == 0.0 for c in hyp.coefs))
+
     def test(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> stats.WaldResult | None:
         m0 = self.hyp_model(fit, hyp)
         x0 = self._x0_for(fit, m0)
-        base = self._sim_est(m0, x0)
+        if self._null_is_current(hyp):
+            base = fit.Yhat[self.prob.split.est[0]:self.prob.split.est[1]]
+        else:
+            base = self._sim_est(m0, x0)
         if base is None:
             return None
         cols = []
