@@ -272,18 +272,27 @@ class Diagnoser:
         hyp = cand.hyp
         fam = REGISTRY[hyp.family]
         beta = cand.wald.beta if cand.wald is not None else np.zeros(len(hyp.coefs))
-        why = []
+        why, best = [], None
         for scale in (1.0, 0.5, 0.25, 0.0):
             start = {c: float(hyp.null.get(c, 0.0)) + scale * float(b) for c, b in zip(hyp.coefs, beta)}
             try:
                 m = fam.refit_model(fit.model, hyp, start)
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
-                return fit_output_error(m, self.prob)
+                f = fit_output_error(m, self.prob)
             except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:
                 why.append(f"from {scale:g} x the test's estimate: {exc}")
-        cand.reason = "refit failed " + "; ".join(why)[:600]
-        return None
+                continue
+            if best is None or f.sse_w < best.sse_w:
+                best = f
+            # a refit that ends above the current model's error stopped in a worse local minimum than
+            # the null it nests: start again closer to the null
+            if f.sse_w <= fit.sse_w * (1 + 1e-9):
+                return f
+            why.append(f"from {scale:g} x the test's estimate: ended above the current model's error")
+        if best is None:
+            cand.reason = "refit failed " + "; ".join(why)[:600]
+        return best
 
     def estimate(self, fit: FitResult, cand: Candidate) -> FitResult | None:
         fam = REGISTRY[cand.hyp.family]

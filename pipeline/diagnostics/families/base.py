@@ -161,5 +161,6 @@ def additive(family: str, model: Model, eq: str, text: str, *, output: bool = Fa
     suffix = text if suffix is _AUTO else suffix
     c = pname(model, name or family, eq, *([suffix] if suffix else []))
     term = Term(family, "expr", eq, c, text=text, on="output" if output else "state")
+    label = desc.pop("term", text)      # the name of the term, when its text is a domain-safe form of it
     return Hypothesis(family, f"{family}:{eq}" + (f":{suffix}" if suffix else ""), [term], [c],
-                      equation=None if output else eq, output=eq if output else None, term=text, **desc)
+                      equation=None if output else eq, output=eq if output else None, term=label, **desc)

@@ -46,8 +46,16 @@ class StaticNonlinearity(Family):
     id = "static_nonlinearity"
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
-        return [additive(self.id, ctx.model, eq, g, name="static") for eq in ctx.structure.dynamic_eqs
+        return [self._hyp(ctx, eq, g) for eq in ctx.structure.dynamic_eqs
                 for g in library(ctx, eq) if not present(ctx.model, g, eq)]
+
+    def _hyp(self, ctx: Context, eq: str, g: str) -> Hypothesis:
+        """``sqrt(z)`` of a state is simulated as ``sqrt(maximum(z, 0))``: the state is positive on the
+        current simulation, but a refit passes through parameter values where it dips below 0 (a tank
+        that empties), and a NaN there would end the refit; the finding is still named ``sqrt(z)``."""
+        if g.startswith("sqrt(") and g[5:-1] in ctx.model.states:
+            return additive(self.id, ctx.model, eq, f"sqrt(maximum({g[5:-1]}, 0))", name="static", suffix=g, term=g)
+        return additive(self.id, ctx.model, eq, g, name="static")
 
     def describe(self, hyp, fit, val, sd):
         c = val[hyp.coefs[0]]
