@@ -40,6 +40,22 @@ def main(argv=None) -> int:
     # keep the section of `make bench-diagnosis` (pipeline.bench.diagnosis), which runs separately
     from .diagnosis import END, START
     old = out.read_text() if out.exists() else ""
+    if a.only and old:
+        # replace only the sections that ran (by their "## " heading); every other section stays
+        text = old
+        for part in parts[2:]:
+            part = part.strip()
+            head = part.splitlines()[0]
+            if head in text:
+                i = text.index(head)
+                ends = [j for j in (text.find("\n## ", i + len(head)), text.find(START, i + len(head))) if j >= 0]
+                j = min(ends) if ends else len(text)
+                text = text[:i] + part + "\n" + text[j:]
+            else:
+                text = text.rstrip() + "\n\n" + part + "\n"
+        out.write_text(text)
+        print(f"updated {', '.join(a.only)} in {a.out}")
+        return 0
     if START in old and END in old:
         parts.append("\n" + old[old.index(START):old.index(END) + len(END)] + "\n")
     out.write_text("\n".join(parts))
