@@ -73,12 +73,15 @@ class Rewrite:
 
 @dataclass(frozen=True)
 class Limit:
-    """State ``state`` clamped to [lo, hi] (parameter names, or None for no bound on that side)."""
+    """State ``state`` clamped to [lo, hi] (parameter names, or None for no bound on that side).
+    ``rate``: the state whose motion the limit stops (the velocity of a position at an end stop): it is
+    set to 0 when the limit is reached while moving outward (an inelastic stop)."""
 
     family: str
     state: str
     lo: str | None = None
     hi: str | None = None
+    rate: str | None = None
 
 
 @dataclass(frozen=True)

@@ -252,10 +252,15 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
             if nl > 0:
                 for j in range(nl):
                     i = limits[j, 0]
+                    r = limits[j, 3]
                     if limits[j, 1] >= 0 and xs[i] < p[limits[j, 1]]:
                         xs[i] = p[limits[j, 1]]
+                        if r >= 0 and xs[r] < 0.0:
+                            xs[r] = 0.0
                     if limits[j, 2] >= 0 and xs[i] > p[limits[j, 2]]:
                         xs[i] = p[limits[j, 2]]
+                        if r >= 0 and xs[r] > 0.0:
+                            xs[r] = 0.0
         for i in range(nx):
             if not (abs(xs[i]) <= bound):
                 for j in range(nx):
@@ -279,7 +284,7 @@ class Programs:
     args: np.ndarray
     consts: np.ndarray
     progs: np.ndarray      # (n, 4): kind (0 param, 1 input, 2 additive term, 3 state eq), target, start, stop
-    limits: np.ndarray     # (n, 3): state, lo param index or -1, hi param index or -1
+    limits: np.ndarray     # (n, 4): state, lo param index or -1, hi param index or -1, rate state or -1
 
 
 def _emit(tree: ast.expr, resolve, ops: list, args: list, consts: list) -> int:
@@ -362,9 +367,10 @@ def programs(model: Model) -> Programs:
         add(2, sidx[term.target], tree, resolver(False, False))
     for s in model.extra_states:
         add(3, sidx[s], model.equations[s].tree, resolver(True, False))   # an actuator state sees the raw input
-    lim = [(sidx[L.state], pidx[L.lo] if L.lo else -1, pidx[L.hi] if L.hi else -1) for L in model.limits]
+    lim = [(sidx[L.state], pidx[L.lo] if L.lo else -1, pidx[L.hi] if L.hi else -1,
+            sidx[L.rate] if L.rate else -1) for L in model.limits]
     return Programs(np.array(ops, np.int64), np.array(args, np.int64), np.array(consts + [0.0], float),
-                    np.array(rows, np.int64).reshape(-1, 4), np.array(lim, np.int64).reshape(-1, 3))
+                    np.array(rows, np.int64).reshape(-1, 4), np.array(lim, np.int64).reshape(-1, 4))
 
 
 def _cache_dir() -> Path:
@@ -478,7 +484,8 @@ def _check_programs(pr: Programs, n_p: int, nx: int, nu: int) -> None:
             tg = pr.progs[pr.progs[:, 0] == kind, 1]
             ok &= not len(tg) or (tg.min() >= 0 and tg.max() < lim)
     if len(pr.limits):
-        ok &= pr.limits[:, 0].max() < nx and pr.limits[:, 1:].max() < n_p
+        ok &= (pr.limits[:, 0].min() >= 0 and pr.limits[:, 0].max() < nx and pr.limits[:, 1:3].max() < n_p
+               and pr.limits[:, 3].max() < nx)
     if not ok:
         raise ValueError("simulate_states: an extension program refers past the state, input or parameter vectors")
 

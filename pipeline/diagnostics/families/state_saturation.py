@@ -7,7 +7,7 @@ the hard limit (the state clamped after every step) with L free, from the best g
 import numpy as np
 
 from ...model import Limit
-from .base import Context, Family, Hypothesis, additive, pname
+from .base import Context, Family, Hypothesis, Structure, additive, pname
 
 QUANTILES = (0.97, 0.9, 0.8)
 
@@ -41,7 +41,11 @@ class StateSaturation(Family):
 
     def refit_model(self, model, hyp, start):
         L = hyp.info["limit_name"]
-        return model.extend([], {L: float(hyp.extra_params[L])}, limits=(Limit(self.id, hyp.state, hi=L),))
+        # a position's limit is an end stop: its velocity stops there (inelastic), or the refit could
+        # not follow a stop that holds the position while the force pushes on
+        rate = Structure.of(model).kin.get(hyp.state)
+        return model.extend([], {L: float(hyp.extra_params[L])},
+                            limits=(Limit(self.id, hyp.state, hi=L, rate=rate),))
 
     def describe(self, hyp, fit, val, sd):
         L = hyp.info["limit_name"]
