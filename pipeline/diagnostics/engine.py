@@ -237,6 +237,8 @@ class Diagnoser:
         are 0 there, added by the generic extension (no rewrite, limit or new state). Its simulation
         at the null is then the fit's own, and the test needs one simulation per coefficient."""
         fam = REGISTRY[hyp.family]
+        if getattr(fam, "null_is_current", False):     # the family says so (a rewrite that is the identity at 0)
+            return all(float(hyp.null.get(c, 0.0)) == 0.0 for c in hyp.coefs)
         coefs = {t.coef for t in hyp.terms}
         return (type(fam).extend is Family.extend and not hyp.input_rewrites and not hyp.param_rewrites
                 and not hyp.limits and not hyp.extra_states and all(c in coefs for c in hyp.coefs)

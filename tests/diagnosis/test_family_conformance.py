@@ -82,3 +82,16 @@ def test_family_conforms(setting, fid):
     names = set(fr.model.states) | set(fr.model.inputs) | set(fr.model.params) | {"t"}
     for s, text in eqs.items():
         parse(text, names)
+
+
+@pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
+def test_a_null_reused_from_the_fit_is_the_fit(setting, fid):
+    """Where the engine skips the null simulation (an additive term at 0, or a family that declares
+    ``null_is_current``), simulating the hypothesis at its null must give the fit's own output."""
+    dg, fit, ctx = setting
+    est = slice(*dg.prob.split.est)
+    for h in REGISTRY[fid].hypotheses(ctx):
+        if not dg._null_is_current(h):
+            continue
+        m0 = dg.hyp_model(fit, h)
+        np.testing.assert_array_equal(dg._sim_est(m0, dg._x0_for(fit, m0)), fit.Yhat[est])

@@ -111,6 +111,9 @@ class Family:
 
     id: str = ""
     stage: str = "structural"     # "structural" (the find-extend loop), "noise" or "pre" (before the loop)
+    # the hypothesis at its null is the current model (checked by the conformance test): the added-term
+    # test then reuses the fit's simulation; additive terms are recognised without it
+    null_is_current: bool = False
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         raise NotImplementedError

@@ -7,6 +7,7 @@ from .base import Context, Family, Hypothesis, pname
 
 class ParameterDrift(Family):
     id = "parameter_drift"
+    null_is_current = True   # p + 0·step(t − t_j) and p·(1 + 0·t) are p: the test reuses the fit's simulation
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model

@@ -17,6 +17,7 @@ SEARCH_STEPS = 7
 
 class ParameterJump(Family):
     id = "parameter_jump"
+    null_is_current = True   # p + 0·step(t − t_j) and p·(1 + 0·t) are p: the test reuses the fit's simulation
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model
