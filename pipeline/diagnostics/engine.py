@@ -274,11 +274,15 @@ class Diagnoser:
         hyp = cand.hyp
         fam = REGISTRY[hyp.family]
         beta = cand.wald.beta if cand.wald is not None else np.zeros(len(hyp.coefs))
-        why, best = [], None
+        why, best, tried = [], None, set()
         for scale in (1.0, 0.5, 0.25, 0.0):
             start = {c: float(hyp.null.get(c, 0.0)) + scale * float(b) for c, b in zip(hyp.coefs, beta)}
             try:
                 m = fam.refit_model(fit.model, hyp, start)
+                key = tuple(sorted(m.params.items()))
+                if key in tried:          # the family's refit model does not depend on this start
+                    continue
+                tried.add(key)
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
                 f = fit_output_error(m, self.prob)
