@@ -5,8 +5,10 @@
   each output by 1/std so outputs of different units weigh alike.
 * Equation error (a fast start when every state is measured): least squares on
   ẋ_k − f(x_k, u_k; θ) with ẋ from central differences.
-* Covariance: cov(θ̂) = σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18, white output noise),
-  computed from the column-scaled Jacobian J D (D = diag 1/‖J_j‖, so a coefficient of 5e7 next to one of
+* Covariance: the sandwich (JᵀJ)⁻¹ Ω̂ (JᵀJ)⁻¹ with Ω̂ a HAC (prewhitened EWC) long-run covariance of
+  the score rows J_t e_t (White 1982; Ljung 1999 §9.3), because output-error residuals are rarely
+  white; for white residuals it reduces to σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18). Both
+  are computed from the column-scaled Jacobian J D (D = diag 1/‖J_j‖, so a coefficient of 5e7 next to one of
   0.3 does not make JᵀJ numerically singular) through its SVD with an explicit rank decision: singular
   values below ``RANK_RTOL`` × the largest are directions the data cannot determine (a finite-difference
   Jacobian is accurate to about √ε ≈ 1.5e-8). Parameters with weight in such a direction get no standard
@@ -219,9 +221,18 @@ def states_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     return X
 
 
-def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.ndarray, Identifiability]:
-    """σ̂² (JᵀJ)⁻¹ from the column-scaled Jacobian's SVD with the rank decision of the module docstring.
-    J D = U S Vᵀ ⇒ (JᵀJ)⁺ = D V S⁻² Vᵀ D over the kept singular values."""
+def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.ndarray | None = None,
+                      ) -> tuple[np.ndarray, Identifiability]:
+    """Parameter covariance from the column-scaled Jacobian's SVD with the rank decision of the module
+    docstring. J D = U S Vᵀ ⇒ (JᵀJ)⁺ = D V S⁻² Vᵀ D over the kept singular values.
+
+    Without ``scores``: σ̂² (JᵀJ)⁺ (Ljung 1999 eq. 9.18, white output noise). With ``scores`` (N×p, the
+    rows g_t = Σ_outputs J_t e_t at θ̂): the sandwich (JᵀJ)⁺ Ω̂ (JᵀJ)⁺ (White 1982; Ljung 1999 §9.3,
+    eq. 9.55 for correlated residuals) with Ω̂ the prewhitened equal-weighted-cosine long-run covariance
+    of the score rows (:func:`pipeline.hac.long_run`, ν = 0.4 N^{2/3}), scaled by N_r/(N_r − p) as the
+    classic σ̂² is. It is formed in the same scaled coordinates, on the kept directions only:
+    cov = D (V_k S_k⁻²V_kᵀ)(D Ω̂ D)(V_k S_k⁻² V_kᵀ) D. For white residuals Ω̂ ≈ σ̂² JᵀJ and the two
+    agree; for smooth residuals the sandwich is the one that covers."""
     p = J.shape[1]
     norms = np.linalg.norm(J, axis=0)
     d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
@@ -232,7 +243,16 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.nd
     cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
     V = Vt.T
     Vk = V[:, keep] / sv[keep]
-    cov = s2 * (d[:, None] * (Vk @ Vk.T) * d[None, :])
+    bread = Vk @ Vk.T                                   # (JᵀJ)⁺ in scaled coordinates
+    if scores is None:
+        cov = s2 * (d[:, None] * bread * d[None, :])
+    else:
+        from .hac import ewc_dof, long_run
+        gs = np.asarray(scores, float) * d
+        n_r = J.shape[0]
+        om = long_run(gs, dof=ewc_dof(gs.shape[0])).omega * (n_r / max(n_r - p, 1))
+        cov = d[:, None] * (bread @ om @ bread) * d[None, :]
+        cov = 0.5 * (cov + cov.T)
     null = V[:, ~keep]
     bad = set(np.flatnonzero(norms == 0))
     dirs = []
@@ -245,6 +265,13 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.nd
         cov[i, :] = np.nan
         cov[:, i] = np.nan
     return cov, Identifiability(int(keep.sum()), p, cond, dirs, [names[i] for i in sorted(bad)])
+
+
+def score_rows(J: np.ndarray, r: np.ndarray, ny: int) -> np.ndarray:
+    """Per-sample score rows g_t = Σ_o J_{(t,o)} r_{(t,o)} (N×p) of a residual raveled sample-major
+    (row t·ny + o), the quantity whose long-run covariance the sandwich needs (Ljung 1999 §9.3)."""
+    g = J * r[:, None]
+    return g.reshape(-1, ny, J.shape[1]).sum(axis=1)
 
 
 def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None:
@@ -330,7 +357,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     dof = max(rw.size - len(th), 1)
     ident = None
     if len(th):
-        cov, ident = scaled_covariance(J, sse / dof, names)
+        cov, ident = scaled_covariance(J, sse / dof, names, scores=score_rows(J, rw, yobs.shape[1]))
     else:
         cov = np.zeros((0, 0))
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if len(th) else np.zeros(0)
