@@ -85,23 +85,22 @@ def cosine_basis(n: int, b: int) -> np.ndarray:
     return np.cos(np.pi * np.outer(np.arange(1, b + 1), t)) * math.sqrt(2.0 / n)
 
 
-def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[float, float]:
-    """Bias factor κ and Satterthwaite degrees of freedom ν_C of the EWC estimate of the long-run
-    variance of scores s_t ε_t when ε is white and replaced by its least-squares residual on the
-    columns of x (N×k), given the design (Bell & McCaffrey 2002, bias-reduced linearisation and its
-    Satterthwaite df, applied to the EWC estimator of Lazarus et al. 2018).
+def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per column a of s: bias factor κ_a and Satterthwaite degrees of freedom ν_a of the EWC estimate
+    of the long-run variance of scores s_{t,a} ε_t when ε is white and replaced by its least-squares
+    residual on the columns of x (N×k), given the design (Bell & McCaffrey 2002, bias-reduced
+    linearisation and its Satterthwaite df, applied to the EWC estimator of Lazarus et al. 2018).
 
-    With W = [cos_j ⊙ s]_j (N×B) and M = I − x x⁺, the cosine transforms Λ = WᵀMε have covariance
+    With W = [cos_j ⊙ s_a]_j (N×B) and M = I − x x⁺, the cosine transforms Λ = WᵀMε have covariance
     σ²C, C = WᵀMW, so E Σ_j Λ_j² = σ² tr C (the unprojected, stationary value is σ² tr WᵀW: κ is their
-    ratio) and var Σ_j Λ_j² = 2σ⁴ tr C², i.e. ν_C = (tr C)²/tr C². Two effects of smooth regressors are
+    ratio) and var Σ_j Λ_j² = 2σ⁴ tr C², i.e. ν = (tr C)²/tr C². Two effects of smooth regressors are
     in it: the projection removes the lowest frequencies, where the estimate lives (κ < 1), and a
-    slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom
-    (ν_C < B). Several columns of s: κ and ν_C of the one with the smallest ν_C."""
+    slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom."""
     n = x.shape[0]
     b = ewc_dof(n) if b is None else b
     q, _ = np.linalg.qr(x)
     basis = cosine_basis(n, b)
-    best = (1.0, float(b))
+    kap, nus = np.ones(s.shape[1]), np.full(s.shape[1], float(b))
     for a in range(s.shape[1]):
         w = basis * s[:, a]                # (B, N) = Wᵀ
         tot = float(np.sum(w * w))
@@ -110,10 +109,16 @@ def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tup
         wq = w @ q
         c = w @ w.T - wq @ wq.T            # WᵀMW
         tr = float(np.trace(c))
-        nu = tr * tr / float(np.sum(c * c)) if tr > 0 else 1.0
-        if nu < best[1]:
-            best = (tr / tot, nu)
-    return best
+        if tr > 0:
+            kap[a], nus[a] = tr / tot, tr * tr / float(np.sum(c * c))
+    return kap, nus
+
+
+def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[float, float]:
+    """κ and ν of :func:`design_terms` for the column of s with the fewest degrees of freedom."""
+    kap, nus = design_terms(x, s, b)
+    i = int(np.argmin(nus)) if len(nus) else 0
+    return (float(kap[i]), float(nus[i])) if len(nus) else (1.0, float(b or ewc_dof(x.shape[0])))
 
 
 def ewc(v: np.ndarray, dof: int) -> np.ndarray:

@@ -49,7 +49,9 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
         return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
                 "bootstrap": {"method": "none (degenerate residuals)", "block": None, "n": len(b2)}}
     lo, hi, dof = _ratio_interval(a2, b2)
-    ci = [float(min(1.0 - math.exp(-lo), rel)), float(max(1.0 - math.exp(-hi), rel))]
+    # L is clipped to ±30 (an RMSE ratio of e^30) so an interval of a near-degenerate record stays finite
+    lo, hi = max(lo, -30.0), min(hi, 30.0)
+    ci = [float(min(-math.expm1(-lo), rel)), float(max(-math.expm1(-hi), rel))]
     return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
             "bootstrap": {"method": "delta method, prewhitened EWC long-run variance, Student t (Diebold-Mariano type)",
                           "block": None, "dof": dof, "n": len(b2)}}
