@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.fft import dct
 
 A_CAP = 0.99   # largest singular value allowed for the prewhitening VAR(1) matrix
 
@@ -79,10 +80,12 @@ def var1(g: np.ndarray, cap: float = A_CAP) -> np.ndarray:
     return (u * s) @ vt
 
 
-def cosine_basis(n: int, b: int) -> np.ndarray:
-    """(B, N) rows √(2/N) cos(π j (t + ½)/N), j = 1..B, t = 0..N−1 (Lazarus et al. 2018, eq. (8))."""
-    t = (np.arange(n) + 0.5) / n
-    return np.cos(np.pi * np.outer(np.arange(1, b + 1), t)) * math.sqrt(2.0 / n)
+def cosine_transform(x: np.ndarray, b: int) -> np.ndarray:
+    """(B, q) Λ_j = √(2/N) Σ_t x_t cos(π j (t + ½)/N), j = 1..B (Lazarus et al. 2018, eq. (8)), from
+    scipy's DCT-II y_j = 2 Σ_t x_t cos(π j (t + ½)/N) in O(N log N): Λ_j = √(2/N) y_j / 2."""
+    n = x.shape[0]
+    y = dct(np.asarray(x, float), type=2, axis=0)
+    return y[1:b + 1] * (math.sqrt(2.0 / n) / 2.0)
 
 
 def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -97,17 +100,20 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
     in it: the projection removes the lowest frequencies, where the estimate lives (κ < 1), and a
     slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom."""
     n = x.shape[0]
-    b = ewc_dof(n) if b is None else b
+    b = int(min(ewc_dof(n) if b is None else b, n // 2))
     q, _ = np.linalg.qr(x)
-    basis = cosine_basis(n, b)
     kap, nus = np.ones(s.shape[1]), np.full(s.shape[1], float(b))
+    j = np.arange(1, b + 1)
     for a in range(s.shape[1]):
-        w = basis * s[:, a]                # (B, N) = Wᵀ
-        tot = float(np.sum(w * w))
+        sa = s[:, a]
+        # WᵀW_jk = (2/N) Σ s² cos_j cos_k = (1/N) Σ s² (cos_{j−k} + cos_{j+k}) from one DCT-II of s²
+        y = np.concatenate([dct(sa * sa, type=2), [0.0]]) / 2.0       # index N: cos(π N(t+½)/N) = 0
+        wtw = (y[np.abs(j[:, None] - j[None, :])] + y[j[:, None] + j[None, :]]) / n
+        tot = float(np.trace(wtw))
         if tot <= 0:
             continue
-        wq = w @ q
-        c = w @ w.T - wq @ wq.T            # WᵀMW
+        wq = cosine_transform(sa[:, None] * q, b)                       # (B, k) = Wᵀq
+        c = wtw - wq @ wq.T                                            # WᵀMW
         tr = float(np.trace(c))
         if tr > 0:
             kap[a], nus[a] = tr / tot, tr * tr / float(np.sum(c * c))
@@ -125,7 +131,7 @@ def ewc(v: np.ndarray, dof: int) -> np.ndarray:
     """EWC long-run covariance of the rows of v (N×q) with B = ``dof`` cosines, sum scale
     (Lazarus et al. 2018, eq. (8)): N·(1/B) Σ_j Λ_j Λ_jᵀ."""
     n = v.shape[0]
-    lam = cosine_basis(n, dof) @ v                                                                  # (B, q)
+    lam = cosine_transform(v, dof)                                                                  # (B, q)
     return n * (lam.T @ lam) / dof
 
 

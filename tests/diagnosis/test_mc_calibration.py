@@ -211,3 +211,18 @@ def test_lr_test_closed_form():
     assert r.statistic == pytest.approx(neff * math.log(10 / 8))
     assert r.p_value == pytest.approx(sps.chi2.sf(neff * math.log(10 / 8), 2))
     assert stats.lr_test(10.0, 10.5, 1000, 1, 0.0).p_value == 1.0
+
+
+def test_design_correction_equals_its_definition():
+    """κ = tr(WᵀMW)/tr(WᵀW), ν = (tr WᵀMW)²/tr((WᵀMW)²) with W = [cos_j ⊙ s] built explicitly."""
+    rng = np.random.default_rng(20)
+    n, b = 301, 12
+    x = _ar(rng, 0.9, (n, 3), 100)
+    s = x[:, :1] + 0.3 * rng.standard_normal((n, 1))
+    t = (np.arange(n) + 0.5) / n
+    W = (np.cos(np.pi * np.outer(np.arange(1, b + 1), t)) * math.sqrt(2.0 / n) * s[:, 0]).T   # N×B
+    M = np.eye(n) - x @ np.linalg.pinv(x)
+    C = W.T @ M @ W
+    kap, nu = hac.design_terms(x, s, b)
+    assert kap[0] == pytest.approx(np.trace(C) / np.trace(W.T @ W), rel=1e-10)
+    assert nu[0] == pytest.approx(np.trace(C) ** 2 / np.sum(C * C), rel=1e-10)
