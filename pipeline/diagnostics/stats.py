@@ -215,22 +215,25 @@ def prewhiten_ar(e: np.ndarray, pmax: int = 20) -> tuple[np.ndarray, np.ndarray]
     return v, a
 
 
-def _line_free(x: np.ndarray, half: int = 8) -> np.ndarray:
+def _line_free(x: np.ndarray, half: int = 8) -> tuple[np.ndarray, float]:
     """x with its most prominent sinusoid removed: the Fourier frequency where the periodogram most
     exceeds its running median over ±``half`` bins (a line-robust estimate of the continuous spectrum),
     refined to the least-squares frequency within ±1 bin (bounded scalar search; the periodogram peak
     is the LS frequency estimate, Walker 1971), then the least-squares sine and cosine at that
     frequency are subtracted (line removal before estimating the continuum: Percival & Walden 1993
-    §10.11). An off-bin line left as leakage would be fitted by the AR model and notched out again."""
+    §10.11). An off-bin line left as leakage would be fitted by the AR model and notched out again.
+    Also returns the peak's ratio to the background I(f_j)·ln 2/median: under a continuous spectrum
+    each ratio is about Exp(1) (I(ω)/f(ω) ~ χ²₂/2, Priestley 1981 §6.1.3; the median of Exp(1) is ln 2)."""
     from scipy.ndimage import median_filter
     from scipy.optimize import minimize_scalar
     n = len(x)
     per = np.abs(np.fft.rfft(x)) ** 2
     per = per[1:(n - 1) // 2 + 1]
     if len(per) < 2 * half + 1:
-        return x
-    bg = median_filter(per, size=2 * half + 1, mode="nearest")
-    j = int(np.argmax(per / np.maximum(bg, 1e-300))) + 1
+        return x, 0.0
+    bg = median_filter(per, size=2 * half + 1, mode="nearest") / math.log(2.0)
+    ratio = per / np.maximum(bg, 1e-300)
+    j = int(np.argmax(ratio)) + 1
     t = np.arange(n)
 
     def fit(f):
@@ -239,7 +242,7 @@ def _line_free(x: np.ndarray, half: int = 8) -> np.ndarray:
 
     res = minimize_scalar(lambda f: float(np.sum((x - fit(f)) ** 2)), bounds=((j - 1) / n, (j + 1) / n),
                           method="bounded", options={"xatol": 1e-4 / n})
-    return x - fit(float(res.x))
+    return x - fit(float(res.x)), float(ratio[j - 1])
 
 
 def fisher_g(e: np.ndarray, alpha: float = 0.01) -> tuple[TestResult, float]:
@@ -250,12 +253,17 @@ def fisher_g(e: np.ndarray, alpha: float = 0.01) -> tuple[TestResult, float]:
     low frequencies from its colour alone (the raw test rejected 100 % of AR(1) φ = 0.8 records). So e
     is first whitened by an AR(p), p ≤ 20 by AIC, fitted by Yule–Walker (:func:`prewhiten_ar`); the
     test is Fisher's g = max I(f_j)/Σ I(f_j) of the whitened series v. A strong line would be fitted by
-    the AR model itself (a pole pair on the unit circle) and notched out of v, so the AR model is
-    fitted to e with its most prominent line removed (:func:`_line_free`) and then applied to e:
-    the colour is whitened, a line is left in. The reported frequency is the refined peak of v's
+    the AR model itself (a pole pair on the unit circle) and notched out of v, so when the most
+    prominent line stands out of the background at level 0.001 (its Exp(1) ratio above
+    ln(q/0.001), q Fourier frequencies: a Bonferroni pre-test) the AR model is fitted to e with that
+    line removed (:func:`_line_free`) and then applied to e: the colour is whitened, the line is left
+    in. Below that level the AR model is fitted to e itself (removing the largest ordinate of a null
+    record would deepen the whitened peak and inflate the size). The reported frequency is the refined peak of v's
     periodogram (parabola on the log of a 4× zero-padded periodogram)."""
     x0 = np.asarray(e, float) - float(np.mean(e))
-    _, a = prewhiten_ar(_line_free(x0))
+    clean, ratio = _line_free(x0)
+    q_all = max(1, (len(x0) - 1) // 2)
+    _, a = prewhiten_ar(clean if ratio > math.log(q_all / 1e-3) else x0)
     p_ar = len(a)
     x = x0[p_ar:] - sum(a[i] * x0[p_ar - 1 - i:len(x0) - 1 - i] for i in range(p_ar)) if p_ar else x0
     n = len(x)
