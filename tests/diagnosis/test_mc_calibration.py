@@ -116,6 +116,7 @@ def test_fisher_g_size_on_ar1_nulls_and_power_on_a_sinusoid_in_ar_noise():
     assert hits >= 0.7 * 200 and close >= 0.95 * hits
 
 
+@pytest.mark.filterwarnings("ignore::FutureWarning")   # statsmodels' yule_walker return-type notice
 def test_prewhitening_ar_matches_statsmodels_yule_walker():
     sm = pytest.importorskip("statsmodels.regression.linear_model")
     x = lfilter([1.0], [1.0, -1.2, 0.5], np.random.default_rng(14).standard_normal(4000))
