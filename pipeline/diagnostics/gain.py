@@ -11,7 +11,8 @@ Monahan 1992; Lazarus, Lewis, Stock & Watson 2018), whose Satterthwaite degrees 
 the uncertainty of the prewhitening coefficient (few when the residuals are smooth). The interval
 L̂ ± t_{ν, 0.975} se is mapped through R = 1 − exp(−L): R is monotone in L, so the interval brackets
 the reported ``relative`` and never exceeds 1. The moving-block bootstrap it replaces (blocks of ⌈√N⌉)
-covered 92 % / 87 % / 74 % at residual AR(1) φ = 0 / 0.9 / 0.98 (N = 1000).
+covered 91 % / 89 % / 76 % at residual AR(1) φ = 0 / 0.9 / 0.98 (N = 1000, 1000 records;
+this interval: 93.8 % / 94.2 % / 95.2 %).
 """
 
 from __future__ import annotations
