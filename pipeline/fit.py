@@ -5,8 +5,10 @@
   each output by 1/std so outputs of different units weigh alike.
 * Equation error (a fast start when every state is measured): least squares on
   ẋ_k − f(x_k, u_k; θ) with ẋ from central differences.
-* Covariance: cov(θ̂) = σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18, white output noise),
-  computed from the column-scaled Jacobian J D (D = diag 1/‖J_j‖, so a coefficient of 5e7 next to one of
+* Covariance: the sandwich (JᵀJ)⁻¹ Ω̂ (JᵀJ)⁻¹ with Ω̂ a HAC (prewhitened EWC) long-run covariance of
+  the score rows J_t e_t (White 1982; Ljung 1999 §9.3), because output-error residuals are rarely
+  white; for white residuals it reduces to σ̂² (JᵀJ)⁻¹, σ̂² = SSE/(N − p) (Ljung 1999, eq. 9.18). Both
+  are computed from the column-scaled Jacobian J D (D = diag 1/‖J_j‖, so a coefficient of 5e7 next to one of
   0.3 does not make JᵀJ numerically singular) through its SVD with an explicit rank decision: singular
   values below ``RANK_RTOL`` × the largest are directions the data cannot determine (a finite-difference
   Jacobian is accurate to about √ε ≈ 1.5e-8). Parameters with weight in such a direction get no standard
@@ -94,10 +96,14 @@ class Identifiability:
     condition: float                       # of the scaled Jacobian, largest/smallest singular value
     directions: list[dict[str, float]] = field(default_factory=list)   # unit null directions (scaled)
     unidentifiable: list[str] = field(default_factory=list)             # parameters without a std
+    cov_dof: float | None = None          # ν of the sandwich covariance (t_ν intervals); None: classic
 
     def record(self) -> dict:
         return {"rank": self.rank, "n_params": self.n_params, "condition_scaled": self.condition,
                 "unidentifiable": list(self.unidentifiable), "directions": self.directions,
+                "covariance": "sandwich (J'J)^-1 Omega (J'J)^-1, Omega a prewhitened EWC long-run covariance of the "
+                              "score rows" if self.cov_dof is not None else "sigma^2 (J'J)^-1",
+                "covariance_dof": self.cov_dof,
                 "note": "directions in column-scaled coordinates (each parameter's change times the norm of "
                         "its Jacobian column): moving along one leaves the fitted simulation unchanged"}
 
@@ -219,9 +225,23 @@ def states_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     return X
 
 
-def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.ndarray, Identifiability]:
-    """σ̂² (JᵀJ)⁻¹ from the column-scaled Jacobian's SVD with the rank decision of the module docstring.
-    J D = U S Vᵀ ⇒ (JᵀJ)⁺ = D V S⁻² Vᵀ D over the kept singular values."""
+def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.ndarray | None = None,
+                      ny: int = 1) -> tuple[np.ndarray, Identifiability]:
+    """Parameter covariance from the column-scaled Jacobian's SVD with the rank decision of the module
+    docstring. J D = U S Vᵀ ⇒ (JᵀJ)⁺ = D V S⁻² Vᵀ D over the kept singular values.
+
+    Without ``scores``: σ̂² (JᵀJ)⁺ (Ljung 1999 eq. 9.18, white output noise). With ``scores`` (N×p, the
+    rows g_t = Σ_outputs J_t e_t at θ̂): the sandwich (JᵀJ)⁺ Ω̂ (JᵀJ)⁺ (White 1982; Ljung 1999 §9.3,
+    eq. 9.55 for correlated residuals) with Ω̂ the prewhitened equal-weighted-cosine long-run covariance
+    of the score rows (:func:`pipeline.hac.long_run`, B = 0.4 N^{2/3} cosines). The residual is a
+    least-squares residual on J's columns, which removes the low frequencies the estimate lives on: each
+    score column's long-run variance is divided by its bias factor κ_a (:func:`pipeline.hac.design_terms`,
+    Bell & McCaffrey 2002; ≈ 1 − p/N for a rough Jacobian, the classic N/(N − p); that classic factor is
+    used for several outputs). It is formed in the same scaled coordinates, on the kept directions only:
+    cov = D (V_k S_k⁻²V_kᵀ)(D Ω̂ D)(V_k S_k⁻² V_kᵀ) D. For white residuals Ω̂ ≈ σ̂² JᵀJ and the two
+    agree; for smooth residuals the sandwich is the one that covers. The estimate's degrees of freedom ν
+    (Satterthwaite; the smallest over the parameters) are returned in ``Identifiability.cov_dof``:
+    θ̂ ± t_{ν,0.975}·std is the 95 % interval."""
     p = J.shape[1]
     norms = np.linalg.norm(J, axis=0)
     d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
@@ -232,7 +252,25 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.nd
     cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
     V = Vt.T
     Vk = V[:, keep] / sv[keep]
-    cov = s2 * (d[:, None] * (Vk @ Vk.T) * d[None, :])
+    bread = Vk @ Vk.T                                   # (JᵀJ)⁺ in scaled coordinates
+    cov_dof = None
+    if scores is None:
+        cov = s2 * (d[:, None] * bread * d[None, :])
+    else:
+        from .hac import design_terms, ewc_dof, long_run
+        gs = np.asarray(scores, float) * d
+        n_r, n = J.shape[0], gs.shape[0]
+        b = ewc_dof(n)
+        if ny == 1 and n > p + 8 and np.all(norms > 0):
+            kap, nus = design_terms(Js, Js, b)
+            kap = np.maximum(kap, 0.05)
+        else:
+            kap, nus = np.full(p, max(n_r - p, 1) / n_r), np.full(p, float(b))
+        lr = long_run(gs, dof=b, base_dof=float(np.min(nus)))
+        cov_dof = lr.dof
+        om = lr.omega / np.sqrt(np.outer(kap, kap))
+        cov = d[:, None] * (bread @ om @ bread) * d[None, :]
+        cov = 0.5 * (cov + cov.T)
     null = V[:, ~keep]
     bad = set(np.flatnonzero(norms == 0))
     dirs = []
@@ -244,7 +282,14 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str]) -> tuple[np.nd
     for i in sorted(bad):
         cov[i, :] = np.nan
         cov[:, i] = np.nan
-    return cov, Identifiability(int(keep.sum()), p, cond, dirs, [names[i] for i in sorted(bad)])
+    return cov, Identifiability(int(keep.sum()), p, cond, dirs, [names[i] for i in sorted(bad)], cov_dof)
+
+
+def score_rows(J: np.ndarray, r: np.ndarray, ny: int) -> np.ndarray:
+    """Per-sample score rows g_t = Σ_o J_{(t,o)} r_{(t,o)} (N×p) of a residual raveled sample-major
+    (row t·ny + o), the quantity whose long-run covariance the sandwich needs (Ljung 1999 §9.3)."""
+    g = J * r[:, None]
+    return g.reshape(-1, ny, J.shape[1]).sum(axis=1)
 
 
 def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None:
@@ -330,7 +375,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     dof = max(rw.size - len(th), 1)
     ident = None
     if len(th):
-        cov, ident = scaled_covariance(J, sse / dof, names)
+        cov, ident = scaled_covariance(J, sse / dof, names, scores=score_rows(J, rw, yobs.shape[1]),
+                                       ny=yobs.shape[1])
     else:
         cov = np.zeros((0, 0))
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if len(th) else np.zeros(0)

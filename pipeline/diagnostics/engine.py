@@ -8,8 +8,10 @@
    its hypotheses (Bonferroni); the periodic family also needs Fisher's g. Families are then
    controlled together with Holm at ``diagnose.alpha``.
 3. For every family that fires, its best hypothesis is added and the model refitted. It is accepted
-   only if the validation free-run RMSE falls with a 95 % block-bootstrap interval of the relative gain
-   above zero **and** BIC on the estimation part falls.
+   only if the validation free-run RMSE falls with a 95 % interval of the relative gain above zero
+   (:mod:`.gain`) **and** a likelihood-ratio test with the effective sample size N(1 − ρ̂)/(1 + ρ̂)
+   on the estimation part rejects the current model at ``alpha`` (:func:`stats.lr_test`); ΔBIC is
+   kept as information.
 4. The accepted extension with the lowest ΔBIC is the finding; the extended model becomes the model
    and the loop repeats, up to ``max_findings`` causes.
 """
@@ -35,6 +37,7 @@ from .families.base import Family
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, structurally_adequate, where_it_fails
 from .noise import diagnose_noise
+from .gain import gain_ci
 
 
 @dataclass
@@ -149,27 +152,6 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
 def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
     """The Fisher-g row with the smallest p-value (one per output)."""
     return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
-
-
-def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator, n_boot: int) -> dict:
-    """Relative gain 1 − RMSE_after/RMSE_before on validation data, with a 95 % moving-block bootstrap
-    interval (Künsch 1989; block length ⌈√N⌉ keeps the residuals' autocorrelation inside blocks)."""
-    b2 = np.sum(before ** 2, axis=1)
-    a2 = np.sum(after ** 2, axis=1)
-    n = len(b2)
-    L = max(10, int(math.ceil(math.sqrt(n))))
-    nb = int(math.ceil(n / L))
-    # block sums from cumulative sums: a resample is nb blocks of L consecutive samples
-    cb = np.concatenate([[0.0], np.cumsum(b2)])
-    ca = np.concatenate([[0.0], np.cumsum(a2)])
-    starts = rng.integers(0, n - L + 1, size=(n_boot, nb))
-    sb = (cb[starts + L] - cb[starts]).sum(axis=1)
-    sa = (ca[starts + L] - ca[starts]).sum(axis=1)
-    rel = 1.0 - np.sqrt(sa / sb)
-    rb, ra = rmse(before), rmse(after)
-    lo, hi = np.percentile(rel, [2.5, 97.5])
-    return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": 1.0 - ra / rb,
-            "ci95": [float(lo), float(hi)], "bootstrap": {"method": "moving block", "block": L, "n": n_boot}}
 
 
 class Diagnoser:
@@ -453,12 +435,16 @@ class Diagnoser:
                 continue
             g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
             dbic = bic_of(f) - bic0
-            ok = g["ci95"][0] > 0 and dbic < 0
+            lr = stats.lr_test(nominal.sse_w, f.sse_w, nominal.resid_est.size, f.n_params - nominal.n_params,
+                               stats.lag1(nominal.resid_est), self.alpha)
+            ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
             rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
                          "reason": "accepted" if ok else "validation error not lower with 95 % confidence"
-                         if g["ci95"][0] <= 0 else "BIC not lower", "p_family": None, "statistic": None})
+                         if g["ci95"][0] <= 0 else f"estimation fit not better by the likelihood-ratio test with "
+                         f"the effective sample size (p = {lr.p_value:.3g}; {lr.detail})",
+                         "p_family": None, "statistic": None})
             _log(f"  intersample {chosen}: gain {g['relative']:+.3f} ci {g['ci95'][0]:+.3f}..{g['ci95'][1]:+.3f}, "
                  f"dBIC {dbic:+.1f}")
             if ok and (best is None or dbic < best[2]):
@@ -518,10 +504,13 @@ class Diagnoser:
                     continue
                 c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
                 c.delta_bic = bic_of(c.fit) - bic0
-                c.accepted = c.gain["ci95"][0] > 0 and c.delta_bic < 0
+                lr = stats.lr_test(current.sse_w, c.fit.sse_w, current.resid_est.size,
+                                   c.fit.n_params - current.n_params, stats.lag1(current.resid_est), self.alpha)
+                c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
                     "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0
-                    else "BIC not lower")
+                    else f"estimation fit not better by the likelihood-ratio test with the effective sample size "
+                         f"(p = {lr.p_value:.3g}; {lr.detail})")
                 _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
                      f"{c.gain['ci95'][1]:+.3f}, dBIC {c.delta_bic:+.1f} -> {c.reason}")
             inter = None
