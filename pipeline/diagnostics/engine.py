@@ -121,22 +121,23 @@ def bic_of(fit: FitResult) -> float:
 
 def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
     """The residual battery on every output (and every output × excited input for the
-    cross-correlation). With one output and one input the names are the plain ones (``whiteness``,
-    ``input_crosscorr``…); otherwise they carry ``[y]`` or ``[u->y]``. Returns the tests and the
-    frequency (cycles/sample) of the most significant Fisher-g peak over the outputs."""
+    cross-correlation). The first output (and its first excited input) keeps the plain names the
+    contract's ``tests`` rows have always had (``ljung_box``, ``input_crosscorrelation``…); the other
+    outputs and pairs add rows named ``…[y]`` / ``…[u->y]``. Returns the tests and the frequency
+    (cycles/sample) of the most significant Fisher-g peak over the outputs."""
     sl = prob.split.est_slice()
     ny = fit.resid_est.shape[1]
     excited = [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
     tests, best = [], None
     for i in range(ny):
         e = fit.resid_est[:, i]
-        tag = f"[{prob.out_names[i]}]" if ny > 1 else ""
+        tag = f"[{prob.out_names[i]}]" if i > 0 else ""
         rows = [stats.mean_test(e, alpha), stats.whiteness(e, 25, alpha), stats.ljung_box(e, 20, alpha),
                 cusum_test(e, Ji := fit.jac[i::ny] if fit.jac is not None else np.zeros((len(e), 0)), prob.t[sl], alpha),
                 cusum_squares_test(e, Ji, prob.t[sl], alpha)]
         for j in excited:
             xc = stats.input_crosscorr(e, prob.U[sl, j], 25, alpha)
-            if ny > 1 or len(excited) > 1:
+            if i > 0 or j != excited[0]:
                 xc.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
             rows.append(xc)
         g, f_cyc = stats.fisher_g(e, alpha)

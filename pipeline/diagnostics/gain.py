@@ -44,8 +44,9 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
     """Relative gain 1 − RMSE_after/RMSE_before of validation residuals (N×ny) with its 95 % interval
     (module docstring). ``rng`` and ``n_boot`` are accepted for the old bootstrap's call signature and
     not used: the interval is analytic and deterministic."""
-    b2 = np.sum(np.atleast_2d(before.T).T ** 2, axis=1)
-    a2 = np.sum(np.atleast_2d(after.T).T ** 2, axis=1)
+    # mean over outputs: ``before``/``after`` are then the RMSE over all residuals (the summary's rmse_sim)
+    b2 = np.mean(np.atleast_2d(before.T).T ** 2, axis=1)
+    a2 = np.mean(np.atleast_2d(after.T).T ** 2, axis=1)
     rb, ra = math.sqrt(float(np.mean(b2))), math.sqrt(float(np.mean(a2)))
     rel = 1.0 - ra / rb if rb > 0 else 0.0
     if rb <= 0 or ra <= 0 or len(b2) < 8:
