@@ -57,7 +57,7 @@ def _oov(family, seed):
 def test_out_of_vocabulary_is_unexplained(tmp_path, family, seed):
     _, s = _summary(tmp_path, family, "msd", seed)
     assert s["diagnosis"]["verdict"] == "unexplained_discrepancy"
-    assert s["diagnosis"]["unexplained"]["where"]["failed_tests"]
+    assert s["diagnosis"]["unexplained"]["failed_tests"]          # and says where it fails
 
 
 NULL_GRID = [(base, noise, colour, seed)
