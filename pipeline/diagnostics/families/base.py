@@ -167,3 +167,31 @@ def additive(family: str, model: Model, eq: str, text: str, *, output: bool = Fa
     label = desc.pop("term", text)      # the name of the term, when its text is a domain-safe form of it
     return Hypothesis(family, f"{family}:{eq}" + (f":{suffix}" if suffix else ""), [term], [c],
                       equation=None if output else eq, output=eq if output else None, term=label, **desc)
+
+
+class StateTermFamily(Family):
+    """A family of one additive term ``c * template(z)`` of a state z, placed where it is physically
+    sensible (:meth:`Structure.pairs`: a position term in its velocity's equation, a velocity term in
+    its own; every dynamic equation with ``diagnose.couplings``). A subclass sets ``role``
+    ("positions" or "velocities"), ``template`` (with ``{z}``) and ``noun`` (the sentence's subject),
+    and may narrow :meth:`admissible`."""
+
+    role: str = "positions"
+    template: str = "{z}"
+    noun: str = "A term"
+
+    def admissible(self, ctx: Context, z: str) -> bool:
+        return True
+
+    def hypotheses(self, ctx: Context) -> list[Hypothesis]:
+        out = []
+        for eq, z in ctx.structure.pairs(self.role, ctx.couplings):
+            term = self.template.format(z=z)
+            if not present(ctx.model, term, eq) and self.admissible(ctx, z):
+                out.append(additive(self.id, ctx.model, eq, term, suffix=z))
+        return out
+
+    def describe(self, hyp, fit, val, sd):
+        c = val[hyp.coefs[0]]
+        return ({"equation": hyp.equation, "term": hyp.term, "coefficient": c, "coefficient_std": sd.get(hyp.coefs[0])},
+                f"{self.noun} {hyp.term} is missing from the equation of {hyp.equation}: adding {c:.4g}*{hyp.term}")
