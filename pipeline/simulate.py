@@ -56,15 +56,7 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
     um = np.empty(nu)
     ub = np.empty(nu)
     du = np.zeros(nu)
-    for k in range(n):
-        for i in range(nx):
-            X[k, i] = xs[i]
-        if k == n - 1:
-            break
-        if foh:
-            for i in range(nu):
-                du[i] = U[k + 1, i] - U[k, i]
-        h = (T[k + 1] - T[k]) / nsub
+{sample_head}
         for s in range(nsub):
             t = T[k] + s * h
             fa = s / nsub
@@ -86,12 +78,7 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
             rhs0(tmp, ub, t + h, p, k4)
             for i in range(nx):
                 xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-        for i in range(nx):
-            if not (abs(xs[i]) <= bound):
-                for j in range(nx):
-                    X[k + 1, j] = xs[j]
-                return k + 1
-    return -1
+{sample_tail}
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -114,15 +101,7 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
     for j in range(np_):
         if progs[j, 0] < 2:
             n_pre += 1
-    for k in range(n):
-        for i in range(nx):
-            X[k, i] = xs[i]
-        if k == n - 1:
-            break
-        if foh:
-            for i in range(nu):
-                du[i] = U[k + 1, i] - U[k, i]
-        h = (T[k + 1] - T[k]) / nsub
+{sample_head}
         for s in range(nsub):
             for stage in range(4):
                 if stage == 0:
@@ -261,13 +240,28 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
                         xs[i] = p[limits[j, 2]]
                         if r >= 0 and xs[r] > 0.0:
                             xs[r] = 0.0
+{sample_tail}
+'''
+
+
+# the per-sample frame both kernels share (generated into each: a call with array arguments per
+# sample would cost what the lean kernel exists to save): store the state, the foh slope and the step
+# h of interval k, and after the sub-steps the divergence check (returns the sample index)
+_SAMPLE_HEAD = """    for k in range(n):
         for i in range(nx):
+            X[k, i] = xs[i]
+        if k == n - 1:
+            break
+        if foh:
+            for i in range(nu):
+                du[i] = U[k + 1, i] - U[k, i]
+        h = (T[k + 1] - T[k]) / nsub"""
+_SAMPLE_TAIL = """        for i in range(nx):
             if not (abs(xs[i]) <= bound):
                 for j in range(nx):
                     X[k + 1, j] = xs[j]
                 return k + 1
-    return -1
-'''
+    return -1"""
 
 
 _OPS = {ast.Add: 10, ast.Sub: 11, ast.Mult: 12, ast.Div: 13, ast.Pow: 14}
@@ -409,7 +403,8 @@ def kernel_source(model: Model) -> str:
     generic = [f"{' ' * 24}dx[{i}] = {to_source(model.equations[s], stage, scalar=True)}"
                for i, s in enumerate(model.nominal_states)]
     return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign),
-                            assign_generic="\n".join(generic))
+                            assign_generic="\n".join(generic), sample_head=_SAMPLE_HEAD,
+                            sample_tail=_SAMPLE_TAIL)
 
 
 _LOADED: dict[str, object] = {}

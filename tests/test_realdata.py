@@ -14,17 +14,22 @@ from tests.seedcases import require_dataset
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _analyse_shipped(tmp_path, config: str, dataset: str) -> dict:
+    """The shipped config ``configs/<config>`` run on ``../shared/datasets/<dataset>``; its summary."""
+    path = require_dataset(dataset)
+    cfg = yaml.safe_load((ROOT / "configs" / config).read_text())
+    cfg["data"]["path"] = str(path)
+    (tmp_path / config).write_text(yaml.safe_dump(cfg))
+    with contextlib.redirect_stderr(io.StringIO()):
+        return analyse(load_config(tmp_path / config)).summary
+
+
 @pytest.mark.realdata
 def test_silverbox_names_cubic_stiffness_and_extended_model_reaches_1_5_mV(tmp_path):
     """Linear MSD fitted on the multisine part (samples 40 650 on), means removed, foh; validated on
     the arrow (samples 0–40 400). Issue 2: cubic_stiffness named; extended free-run RMSE ≤ 1.5 mV
     (linear ≈ 14 mV; a careful grey-box Duffing fit ≈ 1 mV)."""
-    csv = require_dataset("silverbox/SNLS80mV.csv")
-    cfg = yaml.safe_load((ROOT / "configs" / "silverbox.yaml").read_text())
-    cfg["data"]["path"] = str(csv)
-    (tmp_path / "sb.yaml").write_text(yaml.safe_dump(cfg))
-    with contextlib.redirect_stderr(io.StringIO()):
-        s = analyse(load_config(tmp_path / "sb.yaml")).summary
+    s = _analyse_shipped(tmp_path, "silverbox.yaml", "silverbox/SNLS80mV.csv")
     assert s["data"]["estimation"] == [40650, 131072] and s["data"]["validation"] == [0, 40400]
     lin = s["nominal"]["validation"]["rmse_sim"]
     assert 0.010 < lin < 0.018  # the issue's "about 14 mV"
@@ -92,12 +97,7 @@ def test_dryer_names_the_transport_delay_and_no_invented_nonlinearity(tmp_path):
     """configs/dryer.yaml (DaISy dryer, two-column text read as data.format: table): a first-order model
     without dead time. Issue 8: input_delay of about 2-3 samples first, and no static nonlinearity,
     stiffness, friction or saturation invented for a near-linear process."""
-    dat = require_dataset("daisy_dryer/dryer.dat")
-    cfg = yaml.safe_load((ROOT / "configs" / "dryer.yaml").read_text())
-    cfg["data"]["path"] = str(dat)
-    (tmp_path / "d.yaml").write_text(yaml.safe_dump(cfg))
-    with contextlib.redirect_stderr(io.StringIO()):
-        s = analyse(load_config(tmp_path / "d.yaml")).summary
+    s = _analyse_shipped(tmp_path, "dryer.yaml", "daisy_dryer/dryer.dat")
     assert s["data"]["n_samples"] == 1000
     f = s["diagnosis"]["findings"]
     assert f[0]["family"] == "input_delay" and 2.0 <= f[0]["delay_samples"] <= 3.5

@@ -403,13 +403,14 @@ class Diagnoser:
         best = max(c.wald.r2 for c in todo)
         ranked = sorted(todo, key=lambda c: -c.wald.r2)
         keep = [c for c in ranked if c.wald.r2 >= REFIT_SHARE * best][:MAX_REFITS]
+        kept = {id(c) for c in keep}      # by identity: Candidate's dataclass equality compares arrays
         for c in todo:
-            if c not in keep:
+            if id(c) not in kept:
                 c.reason = (f"not refitted: its added-term test explains {100 * c.wald.r2:.2g} % of the residual, "
                             + (f"under {REFIT_SHARE:g} x the {100 * best:.2g} % of the strongest candidate"
                                if c.wald.r2 < REFIT_SHARE * best else
                                f"and {MAX_REFITS} candidates explain more"))
-        return [c for c in todo if c in keep]
+        return [c for c in todo if id(c) in kept]
 
     def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
         """The ``intersample`` pre-stage (see :mod:`.families.intersample`). An alternative rejected
