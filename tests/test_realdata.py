@@ -105,3 +105,52 @@ def test_dryer_names_the_transport_delay_and_no_invented_nonlinearity(tmp_path):
                 "input_saturation", "dead_zone", "state_saturation"}
     assert not invented & {x["family"] for x in f}
     assert s["final"]["validation"]["rmse_sim"] < 0.5 * s["nominal"]["validation"]["rmse_sim"]
+
+
+@pytest.mark.realdata
+def test_heating_system_is_unexplained_and_not_blamed_on_noise(tmp_path):
+    """configs/heating_system.yaml (DaISy heating, first-order linear thermal model). Issue 9: the
+    nominal residual holds input dynamics (the model-error model explains most of it), no family's
+    extension is supported by the estimation part, so the verdict is ``unexplained_discrepancy`` and the
+    noise families are "not tested" (before: "colored_noise", RMSE 8.133 -> 8.133).
+
+    Why V**2 is not named: written by hand, b*V**2 in place of b*V fits the *estimation* part worse
+    (free-run RMSE 3.84 vs 3.44 °C) although it extrapolates better to the validation part (4.12 vs
+    8.13 °C); a test on the estimation data cannot prefer it. Asserted here so the claim stays true."""
+    path = require_dataset("daisy_heating_system/heating_system.dat")
+    s = _analyse_shipped(tmp_path, "heating_system.yaml", "daisy_heating_system/heating_system.dat")
+    d = s["diagnosis"]
+    assert d["verdict"] == "unexplained_discrepancy"
+    assert not d["findings"]
+    assert any(t.startswith("model_error_model") for t in d["unexplained"]["failed_tests"])
+    noise = {"colored_noise", "heavy_tailed_noise", "heteroscedastic_noise"}
+    assert not noise & {f["family"] for f in d["findings"]}
+
+    cfg = yaml.safe_load((ROOT / "configs" / "heating_system.yaml").read_text())
+    cfg["data"]["path"] = str(path)
+    cfg["diagnose"] = {"families": []}
+    cfg["model"]["equations"]["T"] = "-a*(T - Ta) + b*V**2"
+    cfg["model"]["params"]["b"] = 0.01
+    (tmp_path / "v2.yaml").write_text(yaml.safe_dump(cfg))
+    with contextlib.redirect_stderr(io.StringIO()):
+        v2 = analyse(load_config(tmp_path / "v2.yaml")).summary["nominal"]
+    lin = s["nominal"]
+    assert v2["estimation"]["rmse_sim"] > lin["estimation"]["rmse_sim"]
+    assert v2["validation"]["rmse_sim"] < 0.6 * lin["validation"]["rmse_sim"]
+
+
+@pytest.mark.realdata
+def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
+    """configs/cascaded_tanks.yaml with every family: offsets and sqrt outflow are significant on the
+    nominal model, but no extension lowers the validation error with 95 % confidence (the validation
+    residual is one slow wave). The structural Wald row must then fail adequacy, so the verdict is
+    ``unexplained_discrepancy`` and the noise stage does not run (a bug let a 26 % share count as 0 %
+    when the loop stopped before max_findings, and the verdict was "colored_noise")."""
+    s = _analyse_shipped(tmp_path, "cascaded_tanks.yaml", "cascaded_tanks/dataBenchmark.csv")
+    d = s["diagnosis"]
+    assert d["verdict"] in ("unexplained_discrepancy", "discrepancy")
+    fams = [f["family"] for f in d["findings"]]
+    assert "colored_noise" not in fams
+    if d["verdict"] == "unexplained_discrepancy":
+        sw = next(t for t in d["adequacy"] if t["name"] == "structural_wald")
+        assert not sw["passed"] and sw["explained_share"] >= 0.02

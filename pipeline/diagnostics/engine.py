@@ -487,6 +487,7 @@ class Diagnoser:
             cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
             last_p = {c.hyp.family: c.p_family for c in cands}
+            last_r2 = {c.hyp.family: c.wald.r2 for c in cands}
             _log(f"iteration {it + 1}: {len(cands)} families tested, fired: "
                  f"{[k for k, v in fired.items() if v] or 'none'}")
             rng = np.random.default_rng([self.seed, it])
