@@ -35,7 +35,8 @@ from ..errors import InputError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
 from .families.base import Family
 from .cusum import cusum_squares_test, cusum_test
-from .adequacy import adequacy_tests, feedback_test, structurally_adequate, where_it_fails
+from .adequacy import adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
+from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
 from .gain import gain_ci
 
@@ -571,6 +572,10 @@ class Diagnoser:
                 nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed,
                                                  n_boot=self.n_boot)
                 findings += [f for f in nf if f["family"] in noise_fams][: self.max_findings - len(findings)]
+                spec = [t for t in noise_tests if t.name == HAUSMAN and material(t)]
+                if spec:   # the coloured residual is a structural misfit (pipeline.diagnostics.hausman)
+                    adequacy += spec
+                    structural_ok = False
             else:
                 _log("noise families not tested: the final model fails its adequacy tests")
                 noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,

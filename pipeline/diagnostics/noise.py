@@ -12,6 +12,10 @@ JB and BP assume independent samples, so they are computed on the *prewhitened* 
 Â an AR(p) fitted by least squares with p ≤ 10 chosen by BIC (p = 0, v = e, for white residuals):
 autocorrelation then neither inflates the fourth moment's variance nor the BP regression's n R².
 
+The coloured-noise refit is also a specification test of the structure (:mod:`.hausman`): if its
+physical parameters differ from the output-error ones by more than noise allows, and the difference
+matters (``adequacy.MATERIAL_R2``), the residual is a structural misfit and no noise finding is made.
+
 Each family that fires is fixed, refitted, and kept only if the validation negative log-likelihood
 per sample falls with a 95 % interval above zero (delta method with a prewhitened EWC long-run variance, :mod:`.gain`)
 and the estimation-part BIC (2·NLL + k ln n) falls. "Before" is always white Gaussian noise with the
@@ -45,7 +49,9 @@ from scipy import stats as sps
 
 from ..errors import EstimationError, InputError
 from ..fit import FitResult, Problem, fit_output_error, simulate_full, simulate_until
+from .adequacy import material
 from .gain import mean_interval
+from .hausman import oe_pem_hausman
 from .stats import TestResult, holm, ljung_box
 
 LOG2PI = math.log(2 * math.pi)
@@ -343,6 +349,17 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
             tests.append(TestResult(f"{fam}_fix", float("nan"), float("nan"), None, False,
                                     f"not estimated: {exc}"))
             continue
+        if fam == "colored_noise":
+            # is the colour noise of a correct structure? OE and PEM estimates must then agree
+            nm = key["noise_model"]
+            hz = oe_pem_hausman(fit.theta, fit.jac / float(prob.weights[0]), th,
+                                np.array(nm["coefficients"]), nm["innovation_std"] ** 2, len(fit.model.free),
+                                float(e @ e), float(np.nansum((prob.Y[est[0]:est[1], 0] - Yh[est[0]:est[1], 0]) ** 2)),
+                                alpha)
+            tests.append(hz)
+            if material(hz):
+                # the residual is a structural misfit, not noise: no noise family applies (module docstring)
+                return [], tests
         na = nll(prob.Y[vs, 0] - Yh[vs, 0], Yh[vs, 0])
         nb = nll_gauss(r0_val[len(r0_val) - len(na):], s2_0)
         n1 = nll(prob.Y[est[0]:est[1], 0] - Yh[est[0]:est[1], 0], Yh[est[0]:est[1], 0])

@@ -1,0 +1,112 @@
+"""The output-error vs prediction-error Hausman test (pipeline.diagnostics.hausman), issue 9.
+
+Records are made here with the exact zero-order-hold discretisation of the true system (closed form,
+scipy.signal.lfilter) and AR(1) output noise from lfilter; they share nothing with the simulator.
+
+* Size: a correct first-order structure with AR(1) noise (φ = 0.5 and 0.9): the test rejects at most
+  1.5 α at α = 5 % and 1 %, and the rule that calls a coloured-noise record a structural misfit
+  (p < α and a share ≥ adequacy.MATERIAL_R2) fires at most as often.
+* Power: a second-order system fitted with the first-order structure and the same noise, whose
+  misfit the AR filter would otherwise take as "coloured noise".
+* The closed form V_OE = σ²A⁻¹(HᵀJ)ᵀ(HᵀJ)A⁻¹ equals A⁻¹JᵀΣJA⁻¹ with the explicit AR Toeplitz Σ.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from scipy.linalg import toeplitz
+from scipy.signal import lfilter
+
+from pipeline.config import load_config
+from pipeline.data import load_record, make_split
+from pipeline.diagnostics.adequacy import MATERIAL_R2
+from pipeline.diagnostics.hausman import NAME, covariance_oe_under_ar
+from pipeline.diagnostics.noise import diagnose_noise
+from pipeline.fit import Problem, fit_output_error
+from pipeline.model import Model
+
+DT, N = 0.1, 800
+
+
+def _record(tmp, k: int, rng: np.random.Generator, phi: float, second_order: bool) -> Problem:
+    """y' = −a y + b u (or that in series with a lag of 0.6 s), u held for 8–40 samples, exact zoh."""
+    steps = np.repeat(rng.uniform(-1, 1, N // 8 + 1), rng.integers(8, 40, N // 8 + 1))[:N]
+    u = np.concatenate([steps, np.zeros(max(0, N - len(steps)))])
+    a, b = 0.8, 1.0
+    e1 = np.exp(-a * DT)
+    x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], u)
+    if second_order:
+        e2 = np.exp(-DT / 0.6)
+        x = lfilter([0.0, 1 - e2], [1.0, -e2], x)
+    noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
+    y = x + 0.05 * np.std(x) / np.std(noise) * noise
+    d = tmp / f"r{k}"
+    d.mkdir()
+    pd.DataFrame({"t": DT * np.arange(N), "u": u, "y": y}).to_csv(d / "data.csv", index=False)
+    cfg = {"name": "h", "seed": 0,
+           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
+                    "remove_mean": False},
+           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
+                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
+           "split": {"validation_fraction": 0.3}, "diagnose": {"families": ["colored_noise"]}}
+    (d / "c.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(d / "c.yaml")
+    rec = load_record(lc)
+    model = Model.from_config(lc)
+    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+
+
+def _hausman(tmp, k, rng, phi, second_order):
+    prob, model = _record(tmp, k, rng, phi, second_order)
+    with contextlib.redirect_stderr(io.StringIO()):
+        fit = fit_output_error(model, prob)
+        findings, tests = diagnose_noise(fit, prob, alpha=0.01, seed=0)
+    row = next((t for t in tests if t.name == NAME), None)
+    return row, findings
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("phi", [0.5, 0.9])
+def test_hausman_size_on_correct_structure_with_ar_noise(tmp_path, phi):
+    rng = np.random.default_rng([31, int(10 * phi)])
+    p, share = [], []
+    for k in range(120):
+        row, _ = _hausman(tmp_path, k, rng, phi, False)
+        assert row is not None                  # AR(1) noise of this strength: Ljung-Box always fires
+        p.append(row.p_value)
+        share.append(row.r2)
+    p = np.array(p)
+    assert np.mean(p < 0.05) <= 1.5 * 0.05
+    assert np.mean(p < 0.01) <= 1.5 * 0.01 + 1 / 120     # at most 2 of 120 (binomial resolution)
+    # the rule that turns a coloured-noise record into a structural misfit: significant and material
+    flagged = (p < 0.01) & (np.array(share) >= MATERIAL_R2)
+    assert np.mean(flagged) <= 1.5 * 0.01 + 1 / 120
+
+
+@pytest.mark.slow
+def test_hausman_detects_a_missing_lag_that_ar_noise_would_absorb(tmp_path):
+    rng = np.random.default_rng(77)
+    rej, named = 0, 0
+    for k in range(20):
+        row, findings = _hausman(tmp_path, k, rng, 0.5, True)
+        rej += row is not None and row.p_value < 0.01 and row.r2 >= MATERIAL_R2
+        named += any(f["family"] == "colored_noise" for f in findings)
+    assert rej >= 16
+    assert named <= 20 - rej                  # a rejected structure gets no noise finding
+
+
+def test_oe_covariance_under_ar_noise_matches_the_explicit_toeplitz_form():
+    rng = np.random.default_rng(3)
+    n, a, s2 = 300, np.array([0.7, -0.2]), 0.3
+    J = rng.standard_normal((n, 3)).cumsum(axis=0) / 10
+    h = lfilter([1.0], np.r_[1.0, -a], np.r_[1.0, np.zeros(n - 1)])      # impulse response of 1/A
+    H = toeplitz(h, np.zeros(n))                                          # lower triangular
+    sigma = s2 * H @ H.T
+    ai = np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(covariance_oe_under_ar(J, a, s2), ai @ J.T @ sigma @ J @ ai, rtol=1e-10)
