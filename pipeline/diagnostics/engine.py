@@ -324,6 +324,7 @@ class Diagnoser:
             if best is None:
                 continue
             best.p_family = min(1.0, best.wald.p_value * len(hyps))
+            best = self._lr_screen(fit, fam, hyps, results, best)
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
@@ -335,6 +336,36 @@ class Diagnoser:
                 best.evidence.append(ee)
             out.append(best)
         return out, ctx.skipped
+
+    def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate) -> Candidate:
+        """A family may mark one hypothesis ``info['lr_screen']``: a large, strongly nonlinear effect
+        (a hard end stop) whose linearised added-term test has little power. That hypothesis is
+        refitted now and tested by the likelihood-ratio test with the effective sample size
+        (:func:`stats.lr_test`); the family's p-value is then Bonferroni over its two tests,
+        2·min(p_Wald, p_LR), and the candidate is the one whose test is smaller (its refit kept)."""
+        lr_h = next((h for h in hyps if h.info.get("lr_screen")), None)
+        if lr_h is None:
+            return best
+        best.p_family = min(1.0, 2.0 * best.p_family)
+        wr = results.get(id(lr_h))
+        cand = Candidate(lr_h, wr, 1.0, [])
+        f = self.estimate(fit, cand)
+        if f is None:
+            return best
+        lr = stats.lr_test(fit.sse_w, f.sse_w, fit.resid_est.size, f.n_params - fit.n_params,
+                           stats.lag1(fit.resid_est), self.alpha)
+        p = min(1.0, 2.0 * lr.p_value)
+        if p >= best.p_family:
+            return best
+        cand.fit, cand.p_family = f, p
+        if wr is not None:
+            cand.evidence.append({"test": f"added_term_wald[{lr_h.key}]", "statistic": wr.statistic,
+                                  "p_value": wr.p_value, "dof": wr.dof})
+        else:
+            cand.wald = best.wald
+        cand.evidence.append({"test": f"likelihood_ratio_neff[{lr_h.key}]", "statistic": lr.statistic,
+                              "p_value": lr.p_value, "detail": lr.detail})
+        return cand
 
     def _xcorr_lag(self, fit: FitResult) -> dict:
         """Lag (samples, parabola-refined) that maximises the cross-correlation of the measured output
@@ -401,6 +432,10 @@ class Diagnoser:
         linearisation is far off; each one left out says so in the history."""
         if len(todo) <= 1:
             return todo
+        prefit = [c for c in todo if c.fit is not None]     # refitted by its screen already: no cost
+        todo = [c for c in todo if c.fit is None]
+        if not todo:
+            return prefit
         best = max(c.wald.r2 for c in todo)
         ranked = sorted(todo, key=lambda c: -c.wald.r2)
         keep = [c for c in ranked if c.wald.r2 >= REFIT_SHARE * best][:MAX_REFITS]
@@ -411,7 +446,7 @@ class Diagnoser:
                             + (f"under {REFIT_SHARE:g} x the {100 * best:.2g} % of the strongest candidate"
                                if c.wald.r2 < REFIT_SHARE * best else
                                f"and {MAX_REFITS} candidates explain more"))
-        return [c for c in todo if id(c) in kept]
+        return prefit + [c for c in todo if id(c) in kept]
 
     def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
         """The ``intersample`` pre-stage (see :mod:`.families.intersample`). An alternative rejected
@@ -501,7 +536,7 @@ class Diagnoser:
             todo = self._screen(todo)
             # refits are independent: run them in threads (the kernel releases the GIL)
             with ThreadPoolExecutor(max_workers=min(len(todo), os.cpu_count() or 1) or 1) as pool:
-                for c, f in zip(todo, pool.map(lambda c: self.estimate(current, c), todo)):
+                for c, f in zip(todo, pool.map(lambda c: c.fit or self.estimate(current, c), todo)):
                     c.fit = f
             for c in todo:
                 if c.fit is None:

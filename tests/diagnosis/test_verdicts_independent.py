@@ -33,7 +33,7 @@ def _summary(tmp_path: Path, family: str, base: str, seed: int, **kw) -> tuple[d
     return case.truth, s
 
 
-# Out-of-vocabulary records still not called unexplained (2 of 12). The others are caught by the
+# Out-of-vocabulary records still not called unexplained (1 of 12). The others are caught by the
 # input cross-correlation / model-error model, by significant added-term tests no extension explains
 # (structural_wald), or by the OE-vs-PEM Hausman test of the coloured-noise refit (hysteresis 1002).
 # (Tried and not kept: a second-order model-error model found 11/12 with the old Newey-West test and
@@ -42,8 +42,7 @@ def _summary(tmp_path: Path, family: str, base: str, seed: int, **kw) -> tuple[d
 KNOWN = {("backlash", 1004): "the unmodeled_dynamics lag explains part of the backlash; on the extended "
                               "model the remainder passes the adequacy tests and the OE-vs-PEM Hausman test "
                               "(p = 0.41, 1.5 % of the SSE), and colored_noise takes it",
-         ("xexp", 1004): "three partial findings (static_nonlinearity, cubic_stiffness, static_nonlinearity) "
-                         "reach max_findings and the extended model passes its adequacy tests"}
+}
 
 
 def _oov(family, seed):
