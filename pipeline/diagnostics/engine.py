@@ -312,18 +312,21 @@ class Diagnoser:
         with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
             results = dict(zip(map(id, flat), pool.map(lambda h: self.test(fit, h, ctx.X), flat)))
         for fam, hyps in fams:
-            best: Candidate | None = None
-            for h in hyps:
-                wr = results[id(h)]
-                if wr is None:
-                    continue
-                ev = [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic, "p_value": wr.p_value,
-                       "dof": wr.dof}]
-                if best is None or wr.statistic / wr.dof > best.wald.statistic / best.wald.dof:
-                    best = Candidate(h, wr, 1.0, ev)
-            if best is None:
+            tested = [(h, results[id(h)]) for h in hyps if results[id(h)] is not None]
+            if not tested:
                 continue
-            best.p_family = min(1.0, best.wald.p_value * len(hyps))
+            # the family's test: the smallest p over its hypotheses, Bonferroni over their number. Its
+            # representative (the one refitted): among the hypotheses significant at that level, the
+            # one explaining the largest share of the residual (the linearised R² approximates the
+            # refit's SSE drop; the largest statistic can belong to a smaller but sharper effect, e.g.
+            # h*u over sqrt(h) on a Torricelli tank); otherwise the largest statistic per dof
+            p_min = min(wr.p_value for _, wr in tested)
+            sig = [(h, wr) for h, wr in tested if wr.p_value * len(hyps) < self.alpha]
+            h, wr = (max(sig, key=lambda x: x[1].r2) if sig
+                     else max(tested, key=lambda x: x[1].statistic / x[1].dof))
+            best = Candidate(h, wr, 1.0, [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic,
+                                           "p_value": wr.p_value, "dof": wr.dof}])
+            best.p_family = min(1.0, p_min * len(hyps))
             best = self._lr_screen(fit, fam, hyps, results, best)
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
