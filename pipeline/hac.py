@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.fft import dct
+from scipy.fft import dct, next_fast_len
 
 A_CAP = 0.99   # largest singular value allowed for the prewhitening VAR(1) matrix
 
@@ -99,6 +99,7 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
     ratio) and var Σ_j Λ_j² = 2σ⁴ tr C², i.e. ν = (tr C)²/tr C². Two effects of smooth regressors are
     in it: the projection removes the lowest frequencies, where the estimate lives (κ < 1), and a
     slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom."""
+    x, s = _fast_rows(x), _fast_rows(s)
     n = x.shape[0]
     b = int(min(ewc_dof(n) if b is None else b, n // 2))
     q, _ = np.linalg.qr(x)
@@ -118,6 +119,24 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
         if tr > 0:
             kap[a], nus[a] = tr / tot, tr * tr / float(np.sum(c * c))
     return kap, nus
+
+
+FAST_FROM = 4096     # design_terms trims longer series to a length the FFT handles fast (see _fast_rows)
+
+
+def _fast_rows(a: np.ndarray) -> np.ndarray:
+    """The last m rows of a, m the largest length ≤ N whose prime factors are at most 11 (pocketfft's
+    fast lengths), when N ≥ FAST_FROM. A DCT of a length with a large prime factor (Silverbox: N =
+    90 422 = 2·29·1559) runs by Bluestein's algorithm, 8–10× slower; the gap to the next such length
+    is under 0.5 % of N above 4096, and κ, ν are smooth averages over the sample (they change by
+    O(gap/N); checked against the untrimmed values in tests/test_hac.py)."""
+    n = a.shape[0]
+    if n < FAST_FROM:
+        return a
+    m = n
+    while next_fast_len(m, real=False) != m:
+        m -= 1
+    return a[n - m:]
 
 
 def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[float, float]:
