@@ -34,3 +34,7 @@ class SimulationError(InputError):
 
 class EstimationError(InputError):
     """An estimator cannot run on the given problem (singular regressors, bad weights, bad prior...)."""
+
+
+class RefitAbandoned(EstimationError):
+    """A refit whose error stayed above the model it extends for its whole simulation budget."""

@@ -50,3 +50,18 @@ def test_estimated_initial_state():
     prob = Problem(syn.t, syn.u[:, None], X[:, None], ["h"], Split((0, 2000), (2000, 3000)), bound=1e6)
     fit = fit_output_error(replace(m, initial={"h": "estimate"}), prob)
     assert dict(zip(fit.names, fit.theta))["x0.h"] == pytest.approx(1.7, rel=1e-5)
+
+
+def test_refit_is_abandoned_only_when_it_stays_above_the_bound():
+    """abandon_above: a fit from a start whose error is far above the bound, which cannot reach it
+    within abandon_after simulations, raises RefitAbandoned; a fit that gets below it runs to the end
+    (and gives the same answer as without the option)."""
+    from pipeline.errors import RefitAbandoned
+    syn = generate("msd", "none", 0, noise=0.0)
+    prob = _problem(syn, ["x"])
+    good = fit_output_error(_nominal("msd"), prob)
+    bad_start = _nominal("msd").with_params({"c": 6.0, "k": 0.4})
+    with pytest.raises(RefitAbandoned, match="abandoned after 8 simulations"):
+        fit_output_error(bad_start, prob, abandon_above=1e-12, abandon_after=8)
+    again = fit_output_error(_nominal("msd"), prob, abandon_above=1.0 + good.sse_w * 1e3, abandon_after=8)
+    np.testing.assert_array_equal(again.theta, good.theta)

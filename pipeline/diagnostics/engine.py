@@ -72,6 +72,7 @@ class Diagnosis:
 
 
 REFIT_SHARE = 0.2     # see Diagnoser._screen
+REFIT_BUDGET_ITERATIONS = 4   # a refit still above the current error after ~4 iterations is abandoned
 COLOUR_TESTS = ("autocorrelation", "ljung_box", "fisher_g")   # residual tests of colour, not of structure
 MAX_REFITS = 4
 
@@ -270,7 +271,9 @@ class Diagnoser:
                 tried.add(key)
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
-                f = fit_output_error(m, self.prob)
+                # abandoned if still above the current model's error after about four iterations
+                f = fit_output_error(m, self.prob, abandon_above=fit.sse_w * (1 + 1e-9),
+                                     abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
             except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:
                 why.append(f"from {scale:g} x the test's estimate: {exc}")
                 continue
