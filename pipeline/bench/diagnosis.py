@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from .independent import MAGNITUDES, OUT_OF_VOCABULARY, SUPPORTED, make_case, menu
-from .independent.effects import UNIDENTIFIABLE
+from .independent.effects import identifiable
 
 TUNE_SEEDS = (0, 1, 2)
 TEST_SEEDS = (1000, 1001, 1002)
@@ -74,8 +74,8 @@ class Spec:
 
 
 # ------------------------------------------------------------------------------------------ grid
-def _kinds_for(family: str) -> list[str]:
-    return [k for k in INPUT_CYCLE if (family, k) not in UNIDENTIFIABLE]
+def _kinds_for(family: str, base: str) -> list[str]:
+    return [k for k in INPUT_CYCLE if identifiable(family, k, base)]
 
 
 def grid(seeds: tuple[int, ...], *, quick: bool = False, n: int = N) -> list[Spec]:
@@ -100,8 +100,8 @@ def grid(seeds: tuple[int, ...], *, quick: bool = False, n: int = N) -> list[Spe
         return specs
     i = 0
     for fam in effects:
-        kinds = _kinds_for(fam)
         for base in SUPPORTED[fam]:
+            kinds = _kinds_for(fam, base)
             for noise in NOISE_LEVELS:
                 for s in seeds:
                     colour = "white" if fam in NOISE_FAMILIES else COLOUR_CYCLE[i % len(COLOUR_CYCLE)]

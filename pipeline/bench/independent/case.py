@@ -150,7 +150,7 @@ def make_case(family: str, base: str, seed: int, *, magnitude: str = "medium", n
                   **ninfo},
         "input_kind": input_kind, "seed": int(seed), "n": n, "dt": b.dt,
         "intersample_correct": right, "intersample_configured": config["data"]["intersample"],
-        "identifiable": (family, input_kind) not in fx.UNIDENTIFIABLE,
+        "identifiable": fx.identifiable(family, input_kind, base),
         "accept": list(eff.accept or ((eff.family,) if eff.kind == "effect" else ("unexplained_discrepancy",))),
         "true_base_params": dict(b.params),
         "fresh": None if fresh_seed is None else {"seed": int(fresh_seed), "n": n},

@@ -429,6 +429,15 @@ SUPPORTED: dict[str, tuple[str, ...]] = {
 }
 # inputs that make a family unidentifiable: a clipped or dead-banded two-level PRBS is a gain change
 UNIDENTIFIABLE = {("input_saturation", "prbs"), ("dead_zone", "prbs")}
+# ... and on some bases only: the static nonlinearity off the tank is u**2, a constant (an offset) when u
+# is a two-level PRBS (the full bench grid of 2026-12-02 failed there with a division by its zero std)
+UNIDENTIFIABLE_ON = {("static_nonlinearity", "prbs"): tuple(b for b in ALL if b != "tank")}
+
+
+def identifiable(family: str, input_kind: str, base: str) -> bool:
+    """Can the family's effect be told apart from the nominal model with this input on this base?"""
+    return ((family, input_kind) not in UNIDENTIFIABLE
+            and base not in UNIDENTIFIABLE_ON.get((family, input_kind), ()))
 # what the input must look like for the family (before the pilot): scale of std, of the cutoff
 # (the tank's square-root outflow is the base itself: its size is the operating range)
 INPUT_OPTIONS: dict[str, Callable[[int, str], dict]] = {
