@@ -7,15 +7,14 @@ AR prefilter A(q) weights the misfit by frequency differently from the plain out
 §8.5: the limit of a misspecified prediction-error estimate depends on the noise model). Hausman's
 (1978, Econometrica 46(6), 1251–1271) test compares them:
 
-    H = Δᵀ (V_OE − V_PEM)⁺ Δ ~ χ²_r,   Δ = θ̂_PEM − θ̂_OE (the model's free parameters),
+    H = Δᵀ Var(Δ)⁺ Δ ~ χ²_r,   Δ = θ̂_PEM − θ̂_OE (the model's free parameters),
 
-r the rank of V_OE − V_PEM (Moore–Penrose inverse on its positive eigenvalues; Hausman & Taylor 1981).
-Both covariances are computed under the null, i.e. with the fitted AR(p) noise model
-e_t = H(q) ε_t, H = 1/A, var ε = σ²:
-
-* V_OE = σ² A⁻¹ (HᵀJ)ᵀ(HᵀJ) A⁻¹, A = JᵀJ, J the output sensitivities of the output-error fit (the
-  sandwich of least squares under the noise covariance σ² H Hᵀ; Hᵀ is the anti-causal filter);
-* V_PEM = σ² (J̃ᵀJ̃)⁻¹, J̃ = A(q) J (Ljung 1999 eq. 9.18), as returned by the refit.
+r the rank of Var(Δ) (Moore–Penrose inverse on its positive eigenvalues; Hausman & Taylor 1981).
+Var(Δ) is computed under the null, i.e. with the fitted AR(p) noise model e_t = H(q) ε_t, H = 1/A,
+var ε = σ², exactly for the two linearised estimators (:func:`covariance_of_difference`). It equals
+V_OE − V_PEM asymptotically (Hausman 1978, Lemma 2.1), with V_OE = σ²(JᵀJ)⁻¹(HᵀJ)ᵀ(HᵀJ)(JᵀJ)⁻¹ and
+V_PEM = σ²(J̃ᵀJ̃)⁻¹, J̃ = A(q)J (Ljung 1999 eq. 9.18), but unlike that difference of two estimates it is
+positive semi-definite in every sample.
 
 A model-based rather than a HAC variance is used on purpose: the residual of a wrong structure is
 smooth and a long-run variance estimate then has so few degrees of freedom (ν < 1 on a hysteresis
@@ -33,18 +32,9 @@ import numpy as np
 from scipy import stats as sps
 from scipy.signal import lfilter
 
-from .stats import TestResult
+from .stats import TestResult, _ar_filter
 
 NAME = "oe_pem_hausman"
-
-
-def covariance_oe_under_ar(J: np.ndarray, a: np.ndarray, s2: float) -> np.ndarray:
-    """σ² (JᵀJ)⁻¹ Jᵀ Σ J (JᵀJ)⁻¹ with Σ = σ² H Hᵀ the covariance of the AR(p) process
-    e_t = Σ a_i e_{t−i} + ε_t started at rest (H lower-triangular Toeplitz of the impulse response of
-    1/A(q)); HᵀJ by filtering J backwards in time."""
-    HJ = _anticausal(J, a)
-    ai = np.linalg.pinv(J.T @ J)
-    return s2 * ai @ (HJ.T @ HJ) @ ai
 
 
 def _anticausal(J: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -62,10 +52,8 @@ def covariance_of_difference(J: np.ndarray, a: np.ndarray, s2: float) -> np.ndar
     finite samples that difference of two estimates can be nearly singular and made the test
     over-reject (11.7 % at nominal 5 % on the Monte Carlo records of tests/diagnosis/test_hausman.py)."""
     a = np.asarray(a, float)
-    p, n = len(a), J.shape[0]
-    Jt = J[p:].copy()
-    for i in range(p):
-        Jt -= a[i] * J[p - 1 - i:n - 1 - i]
+    p = len(a)
+    Jt = _ar_filter(J, a)
     g = -np.linalg.pinv(J.T @ J) @ _anticausal(J, a).T
     g[:, p:] += np.linalg.pinv(Jt.T @ Jt) @ Jt.T
     return s2 * g @ g.T

@@ -8,7 +8,7 @@ scipy.signal.lfilter) and AR(1) output noise from lfilter; they share nothing wi
   (p < α and a share ≥ adequacy.MATERIAL_R2) fires at most as often.
 * Power: a second-order system fitted with the first-order structure and the same noise, whose
   misfit the AR filter would otherwise take as "coloured noise".
-* The closed form V_OE = σ²A⁻¹(HᵀJ)ᵀ(HᵀJ)A⁻¹ equals A⁻¹JᵀΣJA⁻¹ with the explicit AR Toeplitz Σ.
+* The closed form of Var(θ̂_PEM − θ̂_OE) equals its explicit matrix form (AR Toeplitz Σ, filter F).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from scipy.signal import lfilter
 from pipeline.config import load_config
 from pipeline.data import load_record, make_split
 from pipeline.diagnostics.adequacy import MATERIAL_R2
-from pipeline.diagnostics.hausman import NAME, covariance_oe_under_ar
+from pipeline.diagnostics.hausman import NAME, covariance_of_difference
 from pipeline.diagnostics.noise import diagnose_noise
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
@@ -101,12 +101,21 @@ def test_hausman_detects_a_missing_lag_that_ar_noise_would_absorb(tmp_path):
     assert named <= 20 - rej                  # a rejected structure gets no noise finding
 
 
-def test_oe_covariance_under_ar_noise_matches_the_explicit_toeplitz_form():
+def test_covariance_of_the_difference_matches_the_explicit_matrix_form():
+    """Var(θ̂_PEM − θ̂_OE) = P Σ Pᵀ with P = (J̃ᵀJ̃)⁻¹J̃ᵀF − (JᵀJ)⁻¹Jᵀ, F the (N−p)×N AR prediction-error
+    filter matrix, J̃ = FJ and Σ = σ²HHᵀ (H the lower-triangular Toeplitz impulse response of 1/A),
+    every matrix built explicitly here."""
     rng = np.random.default_rng(3)
     n, a, s2 = 300, np.array([0.7, -0.2]), 0.3
+    p = len(a)
     J = rng.standard_normal((n, 3)).cumsum(axis=0) / 10
     h = lfilter([1.0], np.r_[1.0, -a], np.r_[1.0, np.zeros(n - 1)])      # impulse response of 1/A
     H = toeplitz(h, np.zeros(n))                                          # lower triangular
-    sigma = s2 * H @ H.T
-    ai = np.linalg.inv(J.T @ J)
-    np.testing.assert_allclose(covariance_oe_under_ar(J, a, s2), ai @ J.T @ sigma @ J @ ai, rtol=1e-10)
+    F = np.zeros((n - p, n))
+    for r, t in enumerate(range(p, n)):
+        F[r, t] = 1.0
+        F[r, t - 1 - np.arange(p)] = -a
+    Jt = F @ J
+    P = np.linalg.inv(Jt.T @ Jt) @ Jt.T @ F - np.linalg.inv(J.T @ J) @ J.T
+    np.testing.assert_allclose(covariance_of_difference(J, a, s2), P @ (s2 * H @ H.T) @ P.T,
+                               rtol=1e-8, atol=1e-14)
