@@ -330,12 +330,15 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
 
     ``loss``/``f_scale`` are passed to ``least_squares`` (a robust ρ, e.g. a Student-t negative
     log-likelihood as a callable of z = r²); ``sample_weights`` (n_est,) multiply each estimation
-    sample's residual (weighted LS, e.g. 1/σ_k for a variance model)."""
+    sample's residual (weighted LS, e.g. 1/σ_k for a variance model); (n_est, ny) weight each output's
+    sample separately."""
     est = prob.split.est
     stop = est[1]
     w = prob.weights
     yobs = prob.Y[est[0]:stop]
-    sw = np.ones((yobs.shape[0], 1)) if sample_weights is None else np.asarray(sample_weights, float)[:, None]
+    sw = np.ones((yobs.shape[0], 1)) if sample_weights is None else np.asarray(sample_weights, float)
+    if sw.ndim == 1:
+        sw = sw[:, None]
     x0_names = [f"x0.{s}" for s in model.states if model.initial[s] == "estimate"]
     names = list(model.free) + x0_names
     x0_base = initial_state(model, prob, at=prob.fit_segment()[0])

@@ -633,11 +633,11 @@ class Diagnoser:
             # about 5 % of correct models "unexplained"
             ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
             rejected = [k.split(":", 1)[1] for k, v in stats.holm(ps, self.alpha).items() if v]
-            # a coloured residual of an adequate structure is a noise property: on a single output the
-            # noise families name it (a finding); on several outputs they are not available, and colour
-            # alone is not an unexplained *model* discrepancy
+            # a coloured residual of an adequate structure is a noise property: the noise families name
+            # it (a finding); where they could not run (too few samples) colour alone is not an
+            # unexplained *model* discrepancy
             colour_only = bool(rejected) and all(n.startswith(COLOUR_TESTS) for n in rejected)
-            noise_skipped = prob.Y.shape[1] > 1 and any(f in NOISE_FAMILY_IDS for f in self.families)
+            noise_skipped = any(t.name == "noise_families" for t in noise_tests)
             verdict = ("unexplained_discrepancy" if rejected and not (colour_only and noise_skipped)
                        else "no_significant_discrepancy")
         where = where_it_fails(current, prob, adequacy + final_tests) if verdict == "unexplained_discrepancy" else None

@@ -59,14 +59,42 @@ def covariance_of_difference(J: np.ndarray, a: np.ndarray, s2: float) -> np.ndar
     return s2 * g @ g.T
 
 
-def oe_pem_hausman(theta_oe: np.ndarray, J: np.ndarray, theta_pem: np.ndarray,
-                   a: np.ndarray, s2: float, n_free: int, sse_oe: float, sse_pem_sim: float,
-                   alpha: float) -> TestResult:
+def covariance_of_difference_multi(Js: list[np.ndarray], As: list[np.ndarray], s2s: list[float],
+                                   w_oe: list[float], w_pem: list[float]) -> np.ndarray:
+    """Var(θ̂_PEM − θ̂_OE) under the null on several outputs with independent AR noise e_j = H_j ε_j.
+
+    θ̂_OE minimises Σ_j w_j²‖r_j‖², so θ̂_OE − θ = M⁻¹ Σ_j w_j² J_jᵀ e_j, M = Σ_j w_j² J_jᵀJ_j;
+    θ̂_PEM minimises Σ_j c_j²‖F_j r_j‖², so θ̂_PEM − θ = M̃⁻¹ Σ_j c_j² J̃_jᵀ [0 | I] ε_j,
+    M̃ = Σ_j c_j² J̃_jᵀJ̃_j. With G_j = [0 | M̃⁻¹c_j²J̃_jᵀ] − M⁻¹w_j²(H_jᵀJ_j)ᵀ, Δ = Σ_j G_j ε_j and
+    Var Δ = Σ_j σ_j² G_j G_jᵀ (the outputs' innovations independent). One output: exactly
+    :func:`covariance_of_difference` (the weights cancel)."""
+    Jt = [_ar_filter(J, a) for J, a in zip(Js, As)]
+    Mi = np.linalg.pinv(sum(w ** 2 * J.T @ J for J, w in zip(Js, w_oe)))
+    Mti = np.linalg.pinv(sum(c ** 2 * J.T @ J for J, c in zip(Jt, w_pem)))
+    k = Js[0].shape[1]
+    V = np.zeros((k, k))
+    for J, a, s2, w, c, jt in zip(Js, As, s2s, w_oe, w_pem, Jt):
+        g = -w ** 2 * Mi @ _anticausal(J, a).T
+        g[:, len(a):] += c ** 2 * Mti @ jt.T
+        V += s2 * g @ g.T
+    return V
+
+
+def oe_pem_hausman(theta_oe: np.ndarray, J, theta_pem: np.ndarray, a, s2, n_free: int, sse_oe: float,
+                   sse_pem_sim: float, alpha: float, w_oe: list[float] | None = None,
+                   w_pem: list[float] | None = None) -> TestResult:
     """Hausman test of θ̂_OE against θ̂_PEM over the first ``n_free`` quantities (the model's free
     parameters; estimated initial states are left out). ``J``: unweighted output sensitivities of the
     output-error fit (N×k, all k quantities); ``a``, ``s2``: the refit's AR coefficients and
-    innovation variance; ``sse_pem_sim``: the estimation-part SSE of the free-run simulation with θ̂_PEM."""
-    vd = covariance_of_difference(J, a, s2)[:n_free, :n_free]
+    innovation variance; ``sse_pem_sim``: the estimation-part SSE of the free-run simulation with θ̂_PEM
+    (weighted as ``sse_oe`` is). On several outputs ``J``, ``a`` and ``s2`` are lists (one per output,
+    ``a`` empty where the output is white) and ``w_oe``/``w_pem`` the outputs' weights in the two fits
+    (:func:`covariance_of_difference_multi`)."""
+    if isinstance(J, list):
+        vd = covariance_of_difference_multi(J, [np.asarray(x, float) for x in a], list(s2), w_oe, w_pem)
+    else:
+        vd = covariance_of_difference(J, a, s2)
+    vd = vd[:n_free, :n_free]
     d = np.asarray(theta_pem, float)[:n_free] - np.asarray(theta_oe, float)[:n_free]
     ok = np.isfinite(d) & np.all(np.isfinite(vd), axis=0)
     d, dv = d[ok], vd[np.ix_(ok, ok)]

@@ -36,12 +36,23 @@ nominal fit's σ̂² on the nominal free-run validation residual.
 
 A variance that follows the output also fattens the marginal tails, so when both heteroscedastic and
 heavy-tailed fixes pass, heavy tails are kept only if JB still rejects on v/σ_k. Findings are ranked by
-the validation-NLL drop. Multi-output records are not diagnosed here (one "skipped" test is returned).
+the validation-NLL drop.
+
+**Several outputs.** The three tests run on every output's residual and are Holm-controlled together
+(3 × n_outputs tests at ``alpha``). A family fires when any output rejects; its fix gives each rejecting
+output its own noise model (AR filter, t law or variance model) and keeps the others white Gaussian
+with their nominal σ̂_j². Outputs are assumed independent, so the joint NLL is the sum of the outputs'
+and every refit is Gaussian or Student-t ML of that sum: each output's residual is scaled by its own
+σ (innovation σ of its AR model, t scale, σ_k), not by the output-error weights 1/std(y_j). The
+validation gain is the drop of the joint NLL per sample (summed over outputs); the Hausman test uses the
+same per-output noise models (:func:`.hausman.covariance_of_difference_multi`). With one output every
+formula reduces to the single-output one above.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import optimize, signal
@@ -185,13 +196,15 @@ def block_ci(d: np.ndarray, rng: np.random.Generator | None = None, n_boot: int 
 
 # ---------------------------------------------------------------- refits
 class _Sim:
-    """Raw estimation residual y − ŷ(θ) of output 0 for the fit's parameter vector (free params then
-    estimated initial states, as in fit_output_error), and its finite-difference Jacobian −∂ŷ/∂θ."""
+    """Raw estimation residuals Y − Ŷ(θ), (n_est, n_outputs), for the fit's parameter vector (free
+    params then estimated initial states, as in fit_output_error), and their forward-difference
+    Jacobians ∂r_j/∂θ, (n_outputs, n_est, k)."""
 
     def __init__(self, fit: FitResult, prob: Problem):
         self.fit, self.prob = fit, prob
         self.nf = len(fit.model.free)
         self.est = prob.split.est
+        self.ny = prob.Y.shape[1]
 
     def unpack(self, th):
         m = self.fit.model.with_params(dict(zip(self.fit.model.free, th[:self.nf])))
@@ -202,20 +215,22 @@ class _Sim:
 
     def resid(self, th):
         m, x0 = self.unpack(th)
-        Yh = simulate_until(m, self.prob, x0, self.est[1])
-        if Yh is None or not np.all(np.isfinite(Yh[self.est[0]:self.est[1]])):
+        a, b = self.est
+        Yh = simulate_until(m, self.prob, x0, b)
+        if Yh is None or not np.all(np.isfinite(Yh[a:b])):
             return None
-        return self.prob.Y[self.est[0]:self.est[1], 0] - Yh[self.est[0]:, 0]
+        return self.prob.Y[a:b] - Yh[a:b]
 
     def jac(self, th, r0=None):
         r0 = self.resid(th) if r0 is None else r0
-        J = np.empty((len(r0), len(th)))
+        J = np.zeros((self.ny, r0.shape[0], len(th)))
         for j in range(len(th)):
             h = 1e-6 * max(abs(th[j]), 1e-2)
             t2 = th.copy()
             t2[j] += h
             r = self.resid(t2)
-            J[:, j] = 0.0 if r is None else (r - r0) / h
+            if r is not None:
+                J[:, :, j] = ((r - r0) / h).T
         return J
 
     def full(self, th):
@@ -223,12 +238,74 @@ class _Sim:
         return simulate_full(m, self.prob, x0)
 
 
-def _colored(S: _Sim, e: np.ndarray, a0: np.ndarray, dt: float):
-    """Joint PEM over (θ, a): residual ε = A(q) w(y − ŷ(θ)); Jacobian A(q)∂r/∂θ (finite differences
-    of the simulation) and ∂ε_k/∂a_i = −w r_{k−i} (exact)."""
-    w, p, k, n = float(S.prob.weights[0]), len(a0), len(S.fit.theta), len(e)
-    if p == 0:
+@dataclass
+class _Ctx:
+    """What every fix needs besides the simulator: the nominal residual E (n, ny) and simulated output
+    (n, ny), which outputs the family's test rejected on, the prewhitening AR models of the outputs,
+    their nominal white variances σ̂²_j = mean(E_j²), the sampling period and the output names."""
+    E: np.ndarray
+    yhat: np.ndarray
+    fired: list[bool]
+    a_pre: list[np.ndarray]
+    s2_pre: list[float]
+    s2_0: np.ndarray
+    dt: float
+    names: list[str]
+
+
+@dataclass
+class _Fix:
+    """A fitted noise model: parameters and their covariance, ``nll(R, Yh)`` the per-sample NLL summed
+    over outputs (the last ``len(R) − lag`` samples), extra parameters, contract key and sentence."""
+    theta: np.ndarray
+    cov: np.ndarray
+    nll: object
+    k_extra: int
+    key: dict
+    desc: str
+    pem: dict | None = None      # colored only: what the Hausman test needs
+
+
+def _gauss_rest(R: np.ndarray, ctx: _Ctx, lag: int) -> np.ndarray:
+    """Σ over the outputs the family did not fire on of the white Gaussian NLL with the nominal σ̂²_j."""
+    out = np.zeros(len(R) - lag)
+    for j, f in enumerate(ctx.fired):
+        if not f:
+            out += nll_gauss(R[lag:, j], ctx.s2_0[j])
+    return out
+
+
+def _label(ctx: _Ctx, j: int, what: str = "noise") -> str:
+    return f"The output {what}" if len(ctx.names) == 1 else f"The {what} of output {ctx.names[j]}"
+
+
+def _per_output(key_of, ctx: _Ctx) -> dict:
+    """Contract key of the first output the family fired on, with ``outputs`` (where it fired) and,
+    on several outputs, ``per_output`` (each firing output's own key)."""
+    on = [j for j, f in enumerate(ctx.fired) if f]
+    keys = {ctx.names[j]: key_of(j) for j in on}
+    out = {**keys[ctx.names[on[0]]], "outputs": [ctx.names[j] for j in on]}
+    if len(ctx.names) > 1:
+        out["per_output"] = keys
+    return out
+
+
+def _colored(S: _Sim, ctx: _Ctx) -> _Fix:
+    """Joint PEM over (θ, a_j): residual ε_j = A_j(q)(y_j − ŷ_j(θ))/σ_j on every output j (A_j = 1 where
+    the colour test did not reject, σ_j the prewhitening AR model's innovation σ, fixed); Jacobian
+    A_j(q)∂r_j/∂θ/σ_j (finite differences of the simulation) and ∂ε_jk/∂a_ji = −r_{j,k−i}/σ_j (exact)."""
+    ny, k, n = S.ny, len(S.fit.theta), ctx.E.shape[0]
+    # an output whose Ljung–Box test rejects while BIC prefers AR order 0 keeps a white noise model
+    ctx = replace(ctx, fired=[f and len(a) > 0 for f, a in zip(ctx.fired, ctx.a_pre)])
+    A0 = [np.asarray(ctx.a_pre[j]) if ctx.fired[j] else np.zeros(0) for j in range(ny)]
+    P = [len(a) for a in A0]
+    if sum(P) == 0:
         raise EstimationError("BIC chose a white residual (AR order 0): no noise filter to fit")
+    off = np.r_[0, np.cumsum(P)].astype(int) + k
+    c = np.array([1.0 / math.sqrt(ctx.s2_pre[j] if ctx.fired[j] else ctx.s2_0[j]) for j in range(ny)])
+    if ny == 1:
+        c = np.array([float(S.prob.weights[0])])     # one output: the scale does not move the optimum
+    m_rows = sum(n - p for p in P)
     cache: dict = {}
 
     def r_of(th):
@@ -238,78 +315,172 @@ def _colored(S: _Sim, e: np.ndarray, a0: np.ndarray, dt: float):
         return cache[th.tobytes()]
 
     def fun(x):
-        r = r_of(x[:k])
-        return np.full(n - p, 1e3) if r is None else ar_filter(r * w, x[k:])
+        R = r_of(x[:k])
+        if R is None:
+            return np.full(m_rows, 1e3)
+        return np.concatenate([ar_filter(R[:, j] * c[j], x[off[j]:off[j + 1]]) for j in range(ny)])
 
     def jac(x):
-        r = r_of(x[:k])
-        if r is None:
-            return np.zeros((n - p, k + p))
-        Ja = -np.column_stack([r[p - i:n - i] * w for i in range(1, p + 1)])
-        return np.hstack([ar_filter(S.jac(x[:k], r) * w, x[k:]), Ja])
+        R = r_of(x[:k])
+        if R is None:
+            return np.zeros((m_rows, len(x)))
+        Jt = S.jac(x[:k], R)
+        blocks = []
+        for j in range(ny):
+            p = P[j]
+            B = np.zeros((n - p, len(x)))
+            B[:, :k] = ar_filter(Jt[j] * c[j], x[off[j]:off[j + 1]])
+            for i in range(1, p + 1):
+                B[:, off[j] + i - 1] = -R[p - i:n - i, j] * c[j]
+            blocks.append(B)
+        return np.vstack(blocks)
 
-    x = optimize.least_squares(fun, np.r_[S.fit.theta, a0], jac=jac, x_scale="jac", max_nfev=50).x
-    th, a = x[:k], x[k:]
-    r = S.resid(th)
-    s2 = float(np.mean(ar_filter(r, a) ** 2))
-    Je = ar_filter(S.jac(th, r), a)
-    tau = correlation_time(a, dt)
-    key = {"correlation_time_s": tau,
-           "noise_model": {"type": "AR", "order": p, "coefficients": [float(c) for c in a],
-                           "phi1": float(a[0]), "innovation_std": math.sqrt(s2),
-                           "formula": "e_k = " + " + ".join(f"a{i}*e_(k-{i})" for i in range(1, p + 1))
-                           + " + eps_k"},
-           "validation_nll_kind": "one-step-ahead Gaussian NLL of the AR-whitened validation free-run "
-                                  "residual"}
-    desc = (f"The output noise is coloured (AR({p}), a1 = {a[0]:.3g}, correlation time {tau:.3g} s); "
-            "a prediction-error refit with that noise filter")
-    return th, s2 * np.linalg.pinv(Je.T @ Je), lambda r, yh: nll_gauss(ar_filter(r, a), s2), p, key, desc
+    x = optimize.least_squares(fun, np.r_[S.fit.theta, np.concatenate(A0)], jac=jac, x_scale="jac",
+                               max_nfev=50).x
+    th = x[:k]
+    A = [x[off[j]:off[j + 1]] for j in range(ny)]
+    R = S.resid(th)
+    s2 = [float(np.mean(ar_filter(R[:, j], A[j]) ** 2)) if ctx.fired[j] else float(ctx.s2_0[j])
+          for j in range(ny)]
+    Jt = S.jac(th, R)
+    info = sum(ar_filter(Jt[j], A[j]).T @ ar_filter(Jt[j], A[j]) / s2[j] for j in range(ny))
+    lag = max(P)
+
+    def nll(Rv, yh):
+        out = _gauss_rest(Rv, ctx, lag)
+        for j in range(ny):
+            if ctx.fired[j]:
+                out += nll_gauss(ar_filter(Rv[:, j], A[j])[lag - P[j]:], s2[j])
+        return out
+
+    def key_of(j):
+        a = A[j]
+        return {"correlation_time_s": correlation_time(a, ctx.dt),
+                "noise_model": {"type": "AR", "order": len(a), "coefficients": [float(v) for v in a],
+                                "phi1": float(a[0]), "innovation_std": math.sqrt(s2[j]),
+                                "formula": "e_k = " + " + ".join(f"a{i}*e_(k-{i})" for i in range(1, len(a) + 1))
+                                + " + eps_k"}}
+    key = _per_output(key_of, ctx)
+    key["validation_nll_kind"] = ("one-step-ahead Gaussian NLL of the AR-whitened validation free-run "
+                                  "residual" + (", summed over outputs" if ny > 1 else ""))
+    desc = "; ".join(f"{_label(ctx, j)} is coloured (AR({P[j]}), a1 = {A[j][0]:.3g}, correlation time "
+                     f"{correlation_time(A[j], ctx.dt):.3g} s)" for j in range(ny) if ctx.fired[j])
+    desc += "; a prediction-error refit with that noise filter"
+    pem = {"a": A, "s2": s2, "c": c}
+    return _Fix(th, np.linalg.pinv(info), nll, sum(P), key, desc, pem)
 
 
-def _heavy(S: _Sim, e: np.ndarray, *_):
-    """Student-t ML: two rounds of (ν, s) from the residual, then a refit with ``t_loss(ν, s)``."""
-    nu, s = fit_student_t(e)
+def _heavy(S: _Sim, ctx: _Ctx) -> _Fix:
+    """Student-t ML on the outputs whose Jarque–Bera test rejected, Gaussian on the others: two rounds
+    of (ν_j, s_j) from the residual, then a refit with ``_mixed_t_loss``."""
+    ny, w = S.ny, S.prob.weights
+    on = [j for j in range(ny) if ctx.fired[j]]
+    ts = {j: fit_student_t(ctx.E[:, j]) for j in on}
     th = S.fit.theta.copy()
     for _ in range(2):
         f = fit_output_error(S.fit.model, S.prob, start=dict(zip(S.fit.model.free, th[:S.nf])),
-                             loss=t_loss(nu, s * float(S.prob.weights[0])), f_scale=1.0)
+                             loss=_mixed_t_loss(ctx, ts, w), f_scale=1.0)
         th = f.theta
-        nu, s = fit_student_t(f.resid_est[:, 0])
+        ts = {j: fit_student_t(f.resid_est[:, j]) for j in on}
     J = S.jac(th)
-    d = e - e.mean()
-    kurt = float(np.mean(d ** 4) / np.mean(d ** 2) ** 2)
-    key = {"df": nu, "scale": s, "kurtosis": kurt, "excess_kurtosis": kurt - 3.0,
-           "noise_model": {"type": "student_t", "df": nu, "scale": s},
-           "validation_nll_kind": "Student-t NLL of the validation free-run residual"}
-    desc = (f"The output noise is heavy-tailed (Student t with {nu:.3g} degrees of freedom, residual "
-            f"kurtosis {kurt:.3g}); a maximum-likelihood refit with t noise")
-    cov = (nu + 3) / (nu + 1) * s ** 2 * np.linalg.pinv(J.T @ J)
-    return th, cov, lambda r, yh: -sps.t.logpdf(r, nu, scale=s), 1, key, desc
+    info = sum(J[j].T @ J[j] * ((ts[j][0] + 1) / ((ts[j][0] + 3) * ts[j][1] ** 2) if ctx.fired[j]
+                                else 1.0 / ctx.s2_0[j]) for j in range(ny))
+
+    def nll(Rv, yh):
+        out = _gauss_rest(Rv, ctx, 0)
+        for j in on:
+            out += -sps.t.logpdf(Rv[:, j], ts[j][0], scale=ts[j][1])
+        return out
+
+    def key_of(j):
+        d = ctx.E[:, j] - ctx.E[:, j].mean()
+        kurt = float(np.mean(d ** 4) / np.mean(d ** 2) ** 2)
+        nu, s = ts[j]
+        return {"df": nu, "scale": s, "kurtosis": kurt, "excess_kurtosis": kurt - 3.0,
+                "noise_model": {"type": "student_t", "df": nu, "scale": s}}
+    key = _per_output(key_of, ctx)
+    key["validation_nll_kind"] = "Student-t NLL of the validation free-run residual" + (
+        " (Gaussian on the other outputs), summed over outputs" if ny > 1 else "")
+    desc = "; ".join(f"{_label(ctx, j)} is heavy-tailed (Student t with {ts[j][0]:.3g} degrees of freedom, "
+                     f"residual kurtosis {key_of(j)['kurtosis']:.3g})" for j in on)
+    desc += "; a maximum-likelihood refit with t noise"
+    return _Fix(th, np.linalg.pinv(info), nll, len(on), key, desc)
 
 
-def _hetero(S: _Sim, e: np.ndarray, yhat: np.ndarray, *_):
-    """FGLS: σ_k = a + b|ŷ_k − ȳ| by ML on the residual, refit with weights 1/σ_k, three rounds."""
-    floor = 1e-3 * float(np.std(e))
-    th, r = S.fit.theta.copy(), e
+def _mixed_t_loss(ctx: _Ctx, ts: dict, w: np.ndarray):
+    """ρ for ``least_squares`` on the weighted residual (sample-major, outputs fastest) whose ½Σρ is,
+    up to one constant factor, the joint NLL: c_j² ln(1 + z/c_j²), c_j² = ν_j (s_j w_j)², on the t
+    outputs (times (ν_j+1)/c_j² relative to the first t output) and z/(σ̂_j w_j)² on the Gaussian ones
+    (same relative factor). With one output it is exactly ``t_loss(ν, s w)``."""
+    ny = len(ctx.fired)
+    j0 = next(j for j in range(ny) if ctx.fired[j])
+    c2 = np.array([ts[j][0] * (ts[j][1] * w[j]) ** 2 if ctx.fired[j] else np.inf for j in range(ny)])
+    ref = (ts[j0][0] + 1) / c2[j0]
+    g = np.array([(ts[j][0] + 1) / c2[j] / ref if ctx.fired[j] else 1.0 / (ctx.s2_0[j] * w[j] ** 2) / ref
+                  for j in range(ny)])
+    if ny == 1:
+        return t_loss(ts[j0][0], ts[j0][1] * w[j0])
+    tmask = np.isfinite(c2)
+
+    def rho(z):
+        m = z.size // ny
+        C, G, T = np.tile(np.where(tmask, c2, 1.0), m), np.tile(g, m), np.tile(tmask, m)
+        q = 1.0 + z / C
+        r0 = np.where(T, C * np.log(q), z)
+        r1 = np.where(T, 1.0 / q, 1.0)
+        r2 = np.where(T, -1.0 / (C * q ** 2), 0.0)
+        return np.vstack([G * r0, G * r1, G * r2])
+    return rho
+
+
+def _hetero(S: _Sim, ctx: _Ctx) -> _Fix:
+    """FGLS: σ_jk = a_j + b_j|ŷ_jk − ȳ_j| by ML on each firing output's residual, refit with every
+    output's residual divided by its σ (σ_jk, or σ̂_j on the others), three rounds."""
+    ny, w = S.ny, S.prob.weights
+    on = [j for j in range(ny) if ctx.fired[j]]
+    floor = {j: 1e-3 * float(np.std(ctx.E[:, j])) for j in on}
+    th, R, Yh = S.fit.theta.copy(), ctx.E, ctx.yhat
+    vm: dict = {}
+    n = ctx.E.shape[0]
+    w_ref = float(w[on[0]])
     for it in range(4):
-        ybar = float(np.mean(yhat))
-        a, b = variance_model(r, np.abs(yhat - ybar))
-        sig = np.maximum(a + b * np.abs(yhat - ybar), floor)
+        sig = {}
+        for j in on:
+            ybar = float(np.mean(Yh[:, j]))
+            a, b = variance_model(R[:, j], np.abs(Yh[:, j] - ybar))
+            vm[j] = (a, b, ybar)
+            sig[j] = np.maximum(a + b * np.abs(Yh[:, j] - ybar), floor[j])
         if it == 3:
             break
+        SW = np.empty((n, ny))
+        for j in range(ny):
+            SW[:, j] = (1.0 / sig[j] if j in sig else 1.0 / math.sqrt(ctx.s2_0[j])) * w_ref / w[j]
         f = fit_output_error(S.fit.model, S.prob, start=dict(zip(S.fit.model.free, th[:S.nf])),
-                             sample_weights=1.0 / sig)
-        th, yhat, r = f.theta, f.Yhat[S.est[0]:S.est[1], 0], f.resid_est[:, 0]
-    J = S.jac(th) / sig[:, None]
-    sd = lambda y: np.maximum(a + b * np.abs(y - ybar), floor)
-    key = {"variance_model": {"formula": "sigma_k = a + b*|yhat_k - ybar|", "a": a, "b": b, "ybar": ybar},
-           "validation_nll_kind": "Gaussian NLL of the validation free-run residual with sigma_k"}
-    desc = (f"The output noise level grows with the output (sigma = {a:.3g} + {b:.3g}*|yhat - {ybar:.3g}|); "
-            "a weighted (FGLS) refit")
-    return th, np.linalg.pinv(J.T @ J), lambda r, yh: nll_gauss(r, sd(yh) ** 2), 1, key, desc
+                             sample_weights=SW[:, 0] if ny == 1 else SW)
+        th, Yh, R = f.theta, f.Yhat[S.est[0]:S.est[1]], f.resid_est
+    J = S.jac(th)
+    info = sum((J[j] / (sig[j][:, None] if j in sig else math.sqrt(ctx.s2_0[j]))).T
+               @ (J[j] / (sig[j][:, None] if j in sig else math.sqrt(ctx.s2_0[j]))) for j in range(ny))
+    sd = lambda y, j: np.maximum(vm[j][0] + vm[j][1] * np.abs(y - vm[j][2]), floor[j])
+
+    def nll(Rv, yh):
+        out = _gauss_rest(Rv, ctx, 0)
+        for j in on:
+            out += nll_gauss(Rv[:, j], sd(yh[:, j], j) ** 2)
+        return out
+
+    key = _per_output(lambda j: {"variance_model": {"formula": "sigma_k = a + b*|yhat_k - ybar|",
+                                                    "a": vm[j][0], "b": vm[j][1], "ybar": vm[j][2]}}, ctx)
+    key["validation_nll_kind"] = "Gaussian NLL of the validation free-run residual with sigma_k" + (
+        " (sigma_j on the other outputs), summed over outputs" if ny > 1 else "")
+    desc = "; ".join(f"{_label(ctx, j, 'noise level')} {'grows' if vm[j][1] >= 0 else 'falls'} with the output "
+                     f"(sigma = {vm[j][0]:.3g} + {vm[j][1]:.3g}*|yhat - {vm[j][2]:.3g}|)" for j in on)
+    desc += "; a weighted (FGLS) refit"
+    return _Fix(th, np.linalg.pinv(info), nll, len(on), key, desc)
 
 
 FIXES = {"colored_noise": _colored, "heavy_tailed_noise": _heavy, "heteroscedastic_noise": _hetero}
+TESTS = ("ljung_box", "jarque_bera", "breusch_pagan_koenker")
 
 
 # ---------------------------------------------------------------- driver
@@ -319,52 +490,61 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
 
     ``fit`` is the output-error fit of a correctly structured model; ``truth_params`` (synthetic
     records) adds the mean relative parameter error before/after the fix."""
-    if prob.Y.shape[1] != 1:
-        return [], [TestResult("noise_families", float("nan"), float("nan"), None, True,
-                               "skipped: noise families are diagnosed on single-output records only")]
-    e = fit.resid_est[:, 0]
-    if len(e) < 60 or prob.split.val[1] - prob.split.val[0] < 20:
+    E = fit.resid_est
+    ny = E.shape[1]
+    if len(E) < 60 or prob.split.val[1] - prob.split.val[0] < 20:
         return [], [TestResult("noise_families", float("nan"), float("nan"), None, True,
                                "skipped: fewer than 60 estimation or 20 validation samples")]
     est, vs = prob.split.est, prob.split.val_slice()
     dt = float(np.median(np.diff(prob.t)))
-    yhat = fit.Yhat[est[0]:est[1], 0]
-    a_pre, _ = ar_fit(e)
-    v = ar_filter(e, a_pre)                      # prewhitened residual for JB and BP
-    yc = yhat[len(a_pre):] - yhat.mean()
-    tests = [ljung_box(e, 20, alpha), jarque_bera(v, alpha),
-             breusch_pagan(v, np.column_stack([yc, yc ** 2]), alpha)]
-    fired = holm({f: t.p_value for f, t in zip(FIXES, tests)}, alpha)
+    names = list(prob.out_names)
+    yhat = fit.Yhat[est[0]:est[1]]
+    pre = [ar_fit(E[:, j]) for j in range(ny)]
+    V = [ar_filter(E[:, j], pre[j][0]) for j in range(ny)]          # prewhitened residuals for JB and BP
+    per: list[list[TestResult]] = []                                   # per[j][family index]
+    for j in range(ny):
+        yc = yhat[len(pre[j][0]):, j] - yhat[:, j].mean()
+        per.append([ljung_box(E[:, j], 20, alpha), jarque_bera(V[j], alpha),
+                    breusch_pagan(V[j], np.column_stack([yc, yc ** 2]), alpha)])
+        if j > 0:                 # the residual battery's convention: the first output's plain name
+            for t in per[j]:
+                t.name = f"{t.name}[{names[j]}]"
+    rej = holm({(fi, j): per[j][fi].p_value for j in range(ny) for fi in range(len(FIXES))}, alpha)
+    tests = [t for row in per for t in row]
     S = _Sim(fit, prob)
-    s2_0 = float(np.mean(e ** 2))               # "before": white Gaussian noise, ML variance
-    r0_val = prob.Y[vs, 0] - fit.Yhat[vs, 0]
+    s2_0 = np.mean(E ** 2, axis=0)                # "before": white Gaussian noise, ML variance per output
+    R0v = prob.Y[vs] - fit.Yhat[vs]
     findings = []
-    for (fam, fix), test in zip(FIXES.items(), tests):
-        if not fired[fam]:
+    for fi, (fam, fix) in enumerate(FIXES.items()):
+        fired = [bool(rej[(fi, j)]) for j in range(ny)]
+        if not any(fired):
             continue
+        ctx = _Ctx(E, yhat, fired, [p[0] for p in pre], [p[1] for p in pre], s2_0, dt, names)
         try:
-            th, cov, nll, k_extra, key, desc = fix(S, e, a_pre if fam == "colored_noise" else yhat, dt)
-            Yh = S.full(th)
+            fx = fix(S, ctx)
+            Yh = S.full(fx.theta)
         except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:  # cannot be estimated: no finding
             tests.append(TestResult(f"{fam}_fix", float("nan"), float("nan"), None, False,
                                     f"not estimated: {exc}"))
             continue
+        R1 = prob.Y[est[0]:est[1]] - Yh[est[0]:est[1]]
         if fam == "colored_noise":
             # is the colour noise of a correct structure? OE and PEM estimates must then agree
-            nm = key["noise_model"]
-            hz = oe_pem_hausman(fit.theta, fit.jac / float(prob.weights[0]), th,
-                                np.array(nm["coefficients"]), nm["innovation_std"] ** 2, len(fit.model.free),
-                                float(e @ e), float(np.nansum((prob.Y[est[0]:est[1], 0] - Yh[est[0]:est[1], 0]) ** 2)),
-                                alpha)
+            w = prob.weights
+            Jw = fit.jac.reshape(len(E), ny, -1)
+            hz = oe_pem_hausman(fit.theta, [Jw[:, j, :] / float(w[j]) for j in range(ny)], fx.theta,
+                                fx.pem["a"], fx.pem["s2"], len(fit.model.free),
+                                float(np.sum((E * w) ** 2)), float(np.nansum((R1 * w) ** 2)), alpha,
+                                w_oe=list(map(float, w)), w_pem=list(map(float, fx.pem["c"])))
             tests.append(hz)
             if material(hz):
                 # the residual is a structural misfit, not noise: no noise family applies (module docstring)
                 return [], tests
-        na = nll(prob.Y[vs, 0] - Yh[vs, 0], Yh[vs, 0])
-        nb = nll_gauss(r0_val[len(r0_val) - len(na):], s2_0)
-        n1 = nll(prob.Y[est[0]:est[1], 0] - Yh[est[0]:est[1], 0], Yh[est[0]:est[1], 0])
-        n0 = nll_gauss(e[len(e) - len(n1):], s2_0)
-        dbic = float(2 * (n1.sum() - n0.sum()) + k_extra * math.log(len(n1)))
+        na = fx.nll(prob.Y[vs] - Yh[vs], Yh[vs])
+        nb = sum(nll_gauss(R0v[len(R0v) - len(na):, j], s2_0[j]) for j in range(ny))
+        n1 = fx.nll(R1, Yh[est[0]:est[1]])
+        n0 = sum(nll_gauss(E[len(E) - len(n1):, j], s2_0[j]) for j in range(ny))
+        dbic = float(2 * (n1.sum() - n0.sum()) + fx.k_extra * math.log(len(n1)))
         d = nb - na
         abs_ci = block_ci(d, np.random.default_rng([seed, 99]), n_boot)
         base = abs(float(nb.mean()))
@@ -378,15 +558,18 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
              "absolute_ci95": abs_ci,
              "bootstrap": {"method": "delta method, prewhitened EWC long-run variance, Student t (Diebold-Mariano type)",
                            "block": None, "n": len(d)}}
+        if ny > 1:
+            g["outputs"] = "joint NLL per sample, summed over the outputs " + ", ".join(names)
         if not (g["absolute_ci95"][0] > 0 and dbic < 0):
             continue
-        std = np.sqrt(np.clip(np.diag(cov), 0, None))
-        ev = [{"test": test.name, "statistic": test.statistic, "p_value": test.p_value}]
-        f = {"family": fam, **key, "evidence": ev, "gain": g, "delta_bic": dbic,
-             "description": desc + f" lowers the validation NLL per sample from {g['before']:.4g} to "
-                                   f"{g['after']:.4g} (a drop of {g['absolute']:.3g}, 95 % CI "
-                                   f"{g['absolute_ci95'][0]:.3g} to {g['absolute_ci95'][1]:.3g}).",
-             "params": dict(zip(fit.names, map(float, th))),
+        std = np.sqrt(np.clip(np.diag(fx.cov), 0, None))
+        ev = [{"test": per[j][fi].name, "statistic": per[j][fi].statistic, "p_value": per[j][fi].p_value}
+              for j in range(ny) if fired[j]]
+        f = {"family": fam, **fx.key, "evidence": ev, "gain": g, "delta_bic": dbic,
+             "description": fx.desc + f" lowers the validation NLL per sample from {g['before']:.4g} to "
+                                      f"{g['after']:.4g} (a drop of {g['absolute']:.3g}, 95 % CI "
+                                      f"{g['absolute_ci95'][0]:.3g} to {g['absolute_ci95'][1]:.3g}).",
+             "params": dict(zip(fit.names, map(float, fx.theta))),
              "params_std": dict(zip(fit.names, map(float, std))),
              "interval_width": {"before": float(np.mean(3.92 * fit.std)), "after": float(np.mean(3.92 * std)),
                                 "note": "mean 95 % interval width 2*1.96*std over the estimated quantities"}}
@@ -394,18 +577,27 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
             ks = [k for k in fit.names if k in truth_params]
             rel = lambda t: float(np.mean([abs(t[fit.names.index(k)] / truth_params[k] - 1) for k in ks]))
             f["parameter_error"] = {"metric": "mean relative error", "before": rel(fit.theta),
-                                    "after": rel(th)}
+                                    "after": rel(fx.theta)}
+        f["_fired"] = fired
         findings.append(f)
     by = {f["family"]: f for f in findings}
     if "heteroscedastic_noise" in by and "heavy_tailed_noise" in by:
         # a variance that follows the output also fattens the marginal tails: keep heavy tails only if
-        # the prewhitened residual standardised by the variance model still fails Jarque–Bera
-        vm = by["heteroscedastic_noise"]["variance_model"]
-        sig = np.maximum(vm["a"] + vm["b"] * np.abs(yhat - vm["ybar"]), 1e-3 * float(np.std(e)))
-        jb = jarque_bera(v / sig[len(a_pre):], alpha)
-        tests.append(TestResult("jarque_bera_standardised", jb.statistic, jb.p_value, jb.bound, jb.passed,
-                                "JB of the prewhitened residual divided by sigma_k of the variance model"))
-        if jb.passed:
+        # the prewhitened residual standardised by the variance model still fails Jarque–Bera on an
+        # output where both fired
+        both = [j for j in range(ny) if by["heteroscedastic_noise"]["_fired"][j] and by["heavy_tailed_noise"]["_fired"][j]]
+        still = False
+        for j in both:
+            vm = (by["heteroscedastic_noise"].get("per_output") or {names[j]: by["heteroscedastic_noise"]})[names[j]]["variance_model"]
+            sig = np.maximum(vm["a"] + vm["b"] * np.abs(yhat[:, j] - vm["ybar"]), 1e-3 * float(np.std(E[:, j])))
+            jb = jarque_bera(V[j] / sig[len(pre[j][0]):], alpha)
+            tests.append(TestResult("jarque_bera_standardised" + (f"[{names[j]}]" if j > 0 else ""),
+                                    jb.statistic, jb.p_value, jb.bound, jb.passed,
+                                    "JB of the prewhitened residual divided by sigma_k of the variance model"))
+            still = still or not jb.passed
+        if both and not still:
             findings.remove(by["heavy_tailed_noise"])
+    for f in findings:
+        f.pop("_fired")
     findings.sort(key=lambda f: f["gain"]["before"] - f["gain"]["after"], reverse=True)
     return findings, tests
