@@ -205,9 +205,10 @@ def null_outcome(truth: dict, findings: list[dict]) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ one record
-def _fresh_gain(spec: Spec, ctx) -> float | None:
+def _fresh_gain(spec: Spec, ctx, fresh_input: bool = True) -> float | None:
     """Relative gain 1 − RMSE_after/RMSE_before of the nominal fit and the first extension, on FRESH
-    fresh records with the same truth, residuals pooled over the original validation window."""
+    fresh records with the same truth, residuals pooled over the original validation window; with
+    ``fresh_input=False`` the records keep the original input and only the noise is fresh."""
     from ..simulate import simulate_outputs
     diag = ctx.diag
     if len(diag.fits) < 2:
@@ -218,7 +219,8 @@ def _fresh_gain(spec: Spec, ctx) -> float | None:
     sb = sa = 0.0
     for k in range(1, FRESH + 1):
         c = make_case(spec.family, spec.base, spec.seed, magnitude=spec.magnitude, noise=spec.noise,
-                      colour=spec.colour, input_kind=spec.input_kind, n=spec.n, fresh_seed=k)
+                      colour=spec.colour, input_kind=spec.input_kind, n=spec.n, fresh_seed=k,
+                      fresh_input=fresh_input)
         try:
             yb = simulate_outputs(before.model, c.t, c.U, before.x0, names, strict=False)
             ya = simulate_outputs(after.model, c.t, c.U, after.x0, names, strict=False)
@@ -276,6 +278,11 @@ def run_one(spec: Spec, workdir: str) -> dict:
         if fg is not None:
             lo, hi = g["ci95"]
             rec["coverage"] = {"ci95": [lo, hi], "relative": g["relative"], "fresh": fg, "covered": lo <= fg <= hi}
+        fs = _fresh_gain(spec, ctx, fresh_input=False)
+        if fs is not None:
+            lo, hi = g["ci95"]
+            rec["coverage_same_input"] = {"ci95": [lo, hi], "relative": g["relative"], "fresh": fs,
+                                          "covered": lo <= fs <= hi}
     shutil.rmtree(case.dir, ignore_errors=True)   # the case folder was made by this run
     return rec
 
@@ -311,6 +318,8 @@ def summarise(results: list[dict]) -> dict:
         "oov_right": [len(oov_right), len(oov)],
         "oov_unexplained": [sum(r.get("verdict") == "unexplained_discrepancy" for r in oov), len(oov)],
         "coverage": [sum(c["covered"] for c in cov), len(cov)],
+        "coverage_same_input": [sum(r["coverage_same_input"]["covered"] for r in ok if "coverage_same_input" in r),
+                                sum(1 for r in ok if "coverage_same_input" in r)],
         "seconds_median": statistics.median(sec) if sec else None,
         "seconds_max": max(sec) if sec else None,
         "seconds_generate_median": statistics.median([r["seconds_generate"] for r in ok]) if ok else None,

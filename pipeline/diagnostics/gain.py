@@ -25,6 +25,9 @@ from scipy import stats as sps
 from .. import hac
 
 L_CLIP = math.log(100.0)
+CI_MEANING = ("for this validation input: the interval is the sampling uncertainty of the noise on the "
+              "validation record; a different input (other amplitudes, other frequencies) can give a "
+              "different gain")
 
 
 def _ratio_interval(num: np.ndarray, den: np.ndarray, level: float = 0.95) -> tuple[float, float, int]:
@@ -59,6 +62,7 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
     lo, hi = max(lo, -L_CLIP), min(hi, L_CLIP)
     ci = [float(min(-math.expm1(-lo), rel)), float(max(-math.expm1(-hi), rel))]
     return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
+            "ci95_meaning": CI_MEANING,
             "bootstrap": {"method": "delta method, prewhitened EWC long-run variance, Student t (Diebold-Mariano type)",
                           "block": None, "dof": dof, "n": len(b2)}}
 

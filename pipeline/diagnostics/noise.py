@@ -61,7 +61,7 @@ from scipy import stats as sps
 from ..errors import EstimationError, InputError
 from ..fit import FitResult, Problem, fit_output_error, simulate_full, simulate_until
 from .adequacy import material
-from .gain import mean_interval
+from .gain import CI_MEANING, mean_interval
 from .hausman import oe_pem_hausman
 from .stats import TestResult, holm, ljung_box
 
@@ -553,7 +553,7 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
         # acceptance rule on the absolute drop
         g = {"metric": "validation_nll", "before": float(nb.mean()), "after": float(na.mean()),
              "relative": float(d.mean() / base),
-             "ci95": [abs_ci[0] / base, abs_ci[1] / base],
+             "ci95": [abs_ci[0] / base, abs_ci[1] / base], "ci95_meaning": CI_MEANING,
              "absolute": float(d.mean()),
              "absolute_ci95": abs_ci,
              "bootstrap": {"method": "delta method, prewhitened EWC long-run variance, Student t (Diebold-Mariano type)",

@@ -99,11 +99,12 @@ def _effect_fn(family: str):
 
 def make_case(family: str, base: str, seed: int, *, magnitude: str = "medium", noise: float = 0.02,
               colour: str = "white", input_kind: str = "band", n: int = 2000, out_dir: str | Path | None = None,
-              fresh_seed: int | None = None, fresh_n: int | None = None) -> Case:
+              fresh_seed: int | None = None, fresh_n: int | None = None, fresh_input: bool = True) -> Case:
     """Generate one case (and write it under ``out_dir/<name>/`` when given).
 
     ``fresh_seed``: the same truth (effect parameters sized on the original record) driven by a fresh
-    input and fresh noise of ``fresh_n`` samples — for checking a gain measured on the original.
+    input and fresh noise of ``fresh_n`` samples — for checking a gain measured on the original; with
+    ``fresh_input=False`` only the noise is fresh (the original input, the same length).
     """
     fn = _effect_fn(family)
     if base not in BASES:
@@ -125,10 +126,11 @@ def make_case(family: str, base: str, seed: int, *, magnitude: str = "medium", n
     eff = fn(fx.Ctx(b, np.random.default_rng(s_effect), mag, pilot, input_kind))
     rng_noise = np.random.default_rng(s_noise)
     if fresh_seed is not None:
-        n = int(fresh_n or n)
-        t = np.arange(n) * b.dt
         fs = np.random.SeedSequence([int(seed), key, int(fresh_seed)]).spawn(2)
-        parts = _inputs(b, input_kind, np.random.default_rng(fs[0]), n, **opts)
+        if fresh_input:
+            n = int(fresh_n or n)
+            t = np.arange(n) * b.dt
+            parts = _inputs(b, input_kind, np.random.default_rng(fs[0]), n, **opts)
         rng_noise = np.random.default_rng(fs[1])
     plant_parts = eff.wrap_input(parts, float(t[-1] + b.dt)) if eff.wrap_input else parts
     plant = Plant(b, Stack(plant_parts), dict(b.params))
@@ -153,7 +155,7 @@ def make_case(family: str, base: str, seed: int, *, magnitude: str = "medium", n
         "identifiable": fx.identifiable(family, input_kind, base),
         "accept": list(eff.accept or ((eff.family,) if eff.kind == "effect" else ("unexplained_discrepancy",))),
         "true_base_params": dict(b.params),
-        "fresh": None if fresh_seed is None else {"seed": int(fresh_seed), "n": n},
+        "fresh": None if fresh_seed is None else {"seed": int(fresh_seed), "n": n, "input": bool(fresh_input)},
     }
     case = Case(name, truth, config, t, U, Y, Yc, X)
     if out_dir is not None:
