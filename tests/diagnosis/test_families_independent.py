@@ -99,3 +99,16 @@ def test_band_limited_null_records_under_zoh_and_foh_give_no_physical_finding(tm
     physical = [f for f in fams if f not in ("intersample", "colored_noise", "heavy_tailed_noise",
                                              "heteroscedastic_noise")]
     assert physical == [], fams
+
+
+@pytest.mark.parametrize("base", ["pendulum", "tank", "twomode"])
+def test_an_offset_under_a_prbs_input_is_named_offset_not_an_input_nonlinearity(tmp_path, base):
+    """Under a two-level PRBS every static g(u) (u**2, abs(u), sqrt(u)) is affine in u: an offset plus
+    an input gain. The bench named 4 hidden offsets on PRBS records ``static_nonlinearity u**2`` (a tie
+    with ``offset`` broken by chance); such terms are no longer hypotheses on such inputs."""
+    case = make_case("offset", base, 1003, magnitude="large", input_kind="prbs", out_dir=tmp_path)
+    with contextlib.redirect_stderr(io.StringIO()):
+        s = analyse(load_config(Path(case.dir) / "config.yaml")).summary
+    first = s["diagnosis"]["findings"][0]
+    assert first["family"] == "offset", first
+    assert first["equation"] == case.truth["params"]["equation"]

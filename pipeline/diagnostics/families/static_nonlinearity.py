@@ -5,6 +5,7 @@ over the names the nominal equation already uses (its own physics, no coupling b
   (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)`` (s the
   state's spread; sign-changing states only, on a one-signed state it is the ``offset``);
 * inputs u: ``u**2`` (a lamp's power ∝ V²), ``abs(u)`` (sign-changing inputs), ``sqrt(u)`` (u > 0);
+  none of them when it is affine in u on the estimation data (any g(u) of a two-level PRBS);
 * products ``z*u`` of a state and an input of the equation.
 
 Terms other families own (``x**3``, ``sign(v)``, ``v*abs(v)``, the constant) are left to them."""
@@ -12,6 +13,17 @@ Terms other families own (``x**3``, ``sign(v)``, ``v*abs(v)``, the constant) are
 import numpy as np
 
 from .base import Context, Family, Hypothesis, additive, present
+
+
+AFFINE_RTOL = 1e-3   # a term within this relative RMS of an affine function of its input is affine
+
+
+def _not_affine(g: np.ndarray, u: np.ndarray) -> bool:
+    """Is g(u) more than an affine function a + b·u on the data? On an input with two levels (a PRBS)
+    every g(u) is affine in u: it is an offset plus a change of the input gain, not a nonlinearity."""
+    X = np.column_stack([np.ones_like(u), u])
+    r = g - X @ np.linalg.lstsq(X, g, rcond=None)[0]
+    return float(np.sqrt(np.mean(r ** 2))) > AFFINE_RTOL * float(np.sqrt(np.mean(g ** 2)))
 
 
 def library(ctx: Context, eq: str) -> list[str]:
@@ -33,10 +45,13 @@ def library(ctx: Context, eq: str) -> list[str]:
             out.append(f"tanh({z}/{s:.6g})")
     for u in inputs:
         x = ctx.U[sl, m.inputs.index(u)]
-        out.append(f"{u}**2")
-        if min(np.mean(x > 0), np.mean(x < 0)) >= 0.05:
+        # a term affine in u on the data (any g(u) of a two-level PRBS) is an offset plus an input
+        # gain, which ``offset`` and the nominal b·u cover: as a "nonlinearity" it ties and wins by chance
+        if _not_affine(x ** 2, x):
+            out.append(f"{u}**2")
+        if min(np.mean(x > 0), np.mean(x < 0)) >= 0.05 and _not_affine(np.abs(x), x):
             out.append(f"abs({u})")
-        if np.all(x > 0):
+        if np.all(x > 0) and _not_affine(np.sqrt(x), x):
             out.append(f"sqrt({u})")
     out += [f"{z}*{u}" for z in states for u in inputs]
     return out
