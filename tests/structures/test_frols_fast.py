@@ -124,11 +124,34 @@ def test_frols_matches_previous_algorithm_for_every_memory_layout(order):
     _check_same(res, _reference(P, y, 15))
 
 
+def _proportional_class(P: np.ndarray) -> np.ndarray:
+    """Index of the first column each column is proportional to (exact duplicates and scaled copies)."""
+    u = P / np.where(np.linalg.norm(P, axis=0) > 0, np.linalg.norm(P, axis=0), 1.0)
+    u = u * np.sign(u[np.argmax(np.abs(u), axis=0), np.arange(P.shape[1])])
+    cls = np.arange(P.shape[1])
+    for j in range(P.shape[1]):
+        for i in range(j):
+            if np.allclose(u[:, i], u[:, j], rtol=0, atol=1e-12):
+                cls[j] = cls[i]
+                break
+    return cls
+
+
 def test_frols_matches_previous_algorithm_with_dependent_candidates():
+    """Proportional columns (a and 3a) have exactly the same ERR, so which of the two is taken is
+    decided by rounding, which differs between BLAS kernels (it flipped on a newer CPU). The selection
+    is compared up to that tie, by proportionality class, and the coefficients by the fitted values;
+    ERR and residual energies must agree as on the other problems."""
     P, y = _dependent_problem()
     res = frols(P, y, max_terms=14, rho=1e-300)
-    ref = _reference(P, y, 14)
-    _check_same(res, ref)
+    sel, errs, sse, coef = _reference(P, y, 14)
+    cls = _proportional_class(P)
+    assert list(cls[res.indices]) == list(cls[sel])
+    np.testing.assert_allclose(res.err, errs, rtol=RTOL, atol=0)
+    np.testing.assert_allclose(res.sse, sse, rtol=RTOL, atol=1e-14 * sse[0])
+    fitted = P[:, sel] @ coef
+    np.testing.assert_allclose(P[:, res.indices] @ res.coef_for(14), fitted, rtol=0,
+                               atol=1e-9 * np.max(np.abs(fitted)))
     assert len(res.indices) == 14
 
 
