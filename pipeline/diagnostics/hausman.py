@@ -51,12 +51,7 @@ def covariance_of_difference(J: np.ndarray, a: np.ndarray, s2: float) -> np.ndar
     semi-definite by construction. Asymptotically it is V_OE − V_PEM (Hausman 1978, Lemma 2.1); in
     finite samples that difference of two estimates can be nearly singular and made the test
     over-reject (11.7 % at nominal 5 % on the Monte Carlo records of tests/diagnosis/test_hausman.py)."""
-    a = np.asarray(a, float)
-    p = len(a)
-    Jt = _ar_filter(J, a)
-    g = -np.linalg.pinv(J.T @ J) @ _anticausal(J, a).T
-    g[:, p:] += np.linalg.pinv(Jt.T @ Jt) @ Jt.T
-    return s2 * g @ g.T
+    return covariance_of_difference_multi([J], [np.asarray(a, float)], [s2], [1.0], [1.0])
 
 
 def covariance_of_difference_multi(Js: list[np.ndarray], As: list[np.ndarray], s2s: list[float],
@@ -90,10 +85,9 @@ def oe_pem_hausman(theta_oe: np.ndarray, J, theta_pem: np.ndarray, a, s2, n_free
     (weighted as ``sse_oe`` is). On several outputs ``J``, ``a`` and ``s2`` are lists (one per output,
     ``a`` empty where the output is white) and ``w_oe``/``w_pem`` the outputs' weights in the two fits
     (:func:`covariance_of_difference_multi`)."""
-    if isinstance(J, list):
-        vd = covariance_of_difference_multi(J, [np.asarray(x, float) for x in a], list(s2), w_oe, w_pem)
-    else:
-        vd = covariance_of_difference(J, a, s2)
+    if not isinstance(J, list):         # one output: the weights cancel
+        J, a, s2, w_oe, w_pem = [J], [a], [s2], [1.0], [1.0]
+    vd = covariance_of_difference_multi(J, [np.asarray(x, float) for x in a], list(s2), w_oe, w_pem)
     vd = vd[:n_free, :n_free]
     d = np.asarray(theta_pem, float)[:n_free] - np.asarray(theta_oe, float)[:n_free]
     ok = np.isfinite(d) & np.all(np.isfinite(vd), axis=0)

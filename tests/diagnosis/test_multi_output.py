@@ -26,21 +26,11 @@ from scipy.integrate import solve_ivp
 from pipeline.config import load_config
 from pipeline.runs import analyse
 
-A1, A2, G, B1, B2 = 0.5, 0.3, 0.2, 1.0, 0.8
-
-
-def _inputs(t, seed):
-    rng = np.random.default_rng(seed)
-    f1, f2 = rng.uniform(0.01, 0.4, 6), rng.uniform(0.01, 0.4, 6)
-    p1, p2 = rng.uniform(0, 2 * np.pi, 6), rng.uniform(0, 2 * np.pi, 6)
-    u1 = lambda s: 0.5 * np.sum(np.sin(2 * np.pi * f1 * np.asarray(s)[..., None] + p1), axis=-1) / 2
-    u2 = lambda s: 0.5 * np.sum(np.sin(2 * np.pi * f2 * np.asarray(s)[..., None] + p2), axis=-1) / 2
-    return u1, u2
-
+from .two_capacity import A1, A2, B1, B2, G, config, inputs
 
 def _record(tmp: Path, q: float, seed: int, n: int = 3000, dt: float = 0.05) -> Path:
     t = np.arange(n) * dt
-    u1, u2 = _inputs(t, seed)
+    u1, u2 = inputs(seed)
 
     def f(s, x):
         T1, T2 = x
@@ -55,20 +45,7 @@ def _record(tmp: Path, q: float, seed: int, n: int = 3000, dt: float = 0.05) -> 
     d = tmp / f"mimo-q{q:g}-s{seed}"
     d.mkdir()
     pd.DataFrame({"t": t, "u1": u1(t), "u2": u2(t), "y1": y1, "T2": y2}).to_csv(d / "data.csv", index=False)
-    cfg = {
-        "name": "mimo-two-scales", "seed": seed,
-        "data": {"path": "data.csv", "time": "t", "inputs": ["u1", "u2"], "outputs": ["y1", "T2"],
-                 "intersample": "foh", "remove_mean": False},
-        "model": {"states": ["y1", "T2"], "inputs": ["u1", "u2"],
-                  "params": {"a1": 0.45, "a2": 0.35, "g": 0.2, "b1": 1.0, "b2": 0.8},
-                  "free": ["a1", "a2", "g", "b1", "b2"],
-                  "equations": {"y1": "1000*b1*u1 - a1*y1 + g*(1000*T2 - y1)",
-                                "T2": "b2*u2 - a2*T2 - g*(T2 - y1/1000)"},
-                  "initial": {"y1": 0.0, "T2": 0.0}},
-        "split": {"validation_fraction": 0.3},
-        "diagnose": {"families": ["offset", "static_nonlinearity", "input_saturation"], "alpha": 0.01,
-                     "max_findings": 2},
-    }
+    cfg = config("mimo-two-scales", seed, ["offset", "static_nonlinearity", "input_saturation"])
     (d / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     return d / "config.yaml"
 

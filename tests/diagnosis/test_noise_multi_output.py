@@ -3,11 +3,8 @@ families on a structurally adequate model).
 
 The record is made here with ``scipy.integrate.solve_ivp`` on continuous-time inputs, and its noise
 with numpy / ``scipy.signal.lfilter``, sharing no code with the detector: two coupled thermal
-capacities (as in test_multi_output.py, with no structural error),
-
-    T1' = b1 u1 − a1 T1 + g (T2 − T1),   T2' = b2 u2 − a2 T2 − g (T2 − T1),
-
-measured as y1 = 1000 T1 (milli-units) and T2, so the outputs differ 1000× in scale. Each test puts
+capacities of :mod:`.two_capacity` with no structural error, measured as y1 = 1000 T1 and T2 (the
+outputs differ 1000× in scale). Each test puts
 one noise property on one or both outputs and asserts that it is named on the output(s) it was put on,
 with its key parameter; the Hausman matrix on two outputs is checked against its explicit matrix form.
 """
@@ -31,17 +28,14 @@ from pipeline.config import load_config
 from pipeline.diagnostics.hausman import covariance_of_difference, covariance_of_difference_multi
 from pipeline.runs import analyse
 
-A1, A2, G, B1, B2 = 0.5, 0.3, 0.2, 1.0, 0.8
+from .two_capacity import A1, A2, B1, B2, G, config, inputs
+
 DT, N = 0.05, 3000
 NOISE_FAMILIES = ["colored_noise", "heavy_tailed_noise", "heteroscedastic_noise"]
 
 
 def _clean(seed: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    rng = np.random.default_rng(seed)
-    f1, f2 = rng.uniform(0.01, 0.4, 6), rng.uniform(0.01, 0.4, 6)
-    p1, p2 = rng.uniform(0, 2 * np.pi, 6), rng.uniform(0, 2 * np.pi, 6)
-    u1 = lambda s: 0.25 * np.sum(np.sin(2 * np.pi * f1 * np.asarray(s)[..., None] + p1), axis=-1)
-    u2 = lambda s: 0.25 * np.sum(np.sin(2 * np.pi * f2 * np.asarray(s)[..., None] + p2), axis=-1)
+    u1, u2 = inputs(seed)
     t = np.arange(N) * DT
 
     def f(s, x):
@@ -76,20 +70,7 @@ def _run(tmp: Path, name: str, noise: dict[str, tuple], seed: int) -> dict:
     folder = tmp / name
     folder.mkdir()
     pd.DataFrame({"t": t, **d}).to_csv(folder / "data.csv", index=False)
-    cfg = {
-        "name": name, "seed": seed,
-        "data": {"path": "data.csv", "time": "t", "inputs": ["u1", "u2"], "outputs": ["y1", "T2"],
-                 "intersample": "foh", "remove_mean": False},
-        "model": {"states": ["y1", "T2"], "inputs": ["u1", "u2"],
-                  "params": {"a1": 0.45, "a2": 0.35, "g": 0.2, "b1": 1.0, "b2": 0.8},
-                  "free": ["a1", "a2", "g", "b1", "b2"],
-                  "equations": {"y1": "1000*b1*u1 - a1*y1 + g*(1000*T2 - y1)",
-                                "T2": "b2*u2 - a2*T2 - g*(T2 - y1/1000)"},
-                  "initial": {"y1": 0.0, "T2": 0.0}},
-        "split": {"validation_fraction": 0.3},
-        "diagnose": {"families": ["offset", "static_nonlinearity"] + NOISE_FAMILIES, "alpha": 0.01,
-                     "max_findings": 2},
-    }
+    cfg = config(name, seed, ["offset", "static_nonlinearity"] + NOISE_FAMILIES)
     (folder / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     with contextlib.redirect_stderr(io.StringIO()):
         return analyse(load_config(folder / "config.yaml")).summary["diagnosis"]
