@@ -18,12 +18,31 @@ from __future__ import annotations
 import ast
 import math
 import sys
+import threading
 import unicodedata
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import ConfigError
+
+_PARSE_LOCK = threading.Lock()
+
+
+def parse_eval(src: str) -> ast.Expression:
+    """``ast.parse(src, mode="eval")`` under one process-wide lock.
+
+    CPython 3.11 builds the Python AST objects (``ast2obj``) with a recursion counter kept in
+    interpreter-wide state and seeded from the *calling thread's* depth; when a thread switch lands
+    inside that conversion (a garbage collection running a Python finaliser is enough) and the other
+    thread parses too, the first parse fails with ``SystemError: AST constructor recursion depth
+    mismatch`` (cpython gh-106905; reproduced here with four threads). The diagnosis engine refits
+    candidates in threads, each building models from expressions, so every parse in this package
+    goes through this function.
+    """
+    with _PARSE_LOCK:
+        return ast.parse(src, mode="eval")
+
 
 FUNCTIONS = {
     # name: (arity, numpy source, scalar (numba) source template)
@@ -79,7 +98,7 @@ def parse(text: str | int | float, allowed: set[str], *, where: str = "expressio
     if not src.strip():
         raise ConfigError("empty expression", file=file, key=where)
     try:
-        tree = ast.parse(src.strip(), mode="eval").body
+        tree = parse_eval(src.strip()).body
     except SyntaxError as exc:
         raise ConfigError(f"cannot parse expression ({exc.msg})", file=file, key=where) from None
     except (RecursionError, MemoryError, ValueError):

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .config import LoadedConfig
-from .expressions import Expr, parse
+from .expressions import Expr, parse, parse_eval
 
 _LEGACY = {"const": "1", "out_const": "1", "pow": "{var}**{power}", "sign": "sign({var})",
            "absprod": "{var}*abs({var})", "sin": "sin(2*pi*{freq}*t)", "cos": "cos(2*pi*{freq}*t)"}
@@ -176,8 +176,8 @@ class Model:
     def describe_equations(self) -> dict[str, str]:
         """The (extended) model's equations written out in the expression language, with input and
         parameter rewrites substituted, so each line can be pasted back into a config."""
-        subst = {rw.target: ast.parse(f"({rw.text})", mode="eval").body for rw in self.input_rewrites}
-        psub = {rw.target: ast.parse(f"({rw.text})", mode="eval").body for rw in self.param_rewrites}
+        subst = {rw.target: parse_eval(f"({rw.text})").body for rw in self.input_rewrites}
+        psub = {rw.target: parse_eval(f"({rw.text})").body for rw in self.param_rewrites}
         out = {}
         for s in self.states:
             tree = self.equations[s].tree
@@ -192,7 +192,7 @@ class Model:
 
 
 def _wrap(text: str) -> str:
-    node = ast.parse(text, mode="eval").body
+    node = parse_eval(text).body
     return text if isinstance(node, (ast.Name, ast.Constant, ast.Call)) or (
         isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Mult, ast.Pow))) else f"({text})"
 

@@ -15,6 +15,7 @@ from typing import Mapping
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.expressions import parse_eval
 
 FUNCTIONS = {
     "sin": (np.sin, 1), "cos": (np.cos, 1), "tan": (np.tan, 1), "exp": (np.exp, 1),
@@ -311,7 +312,7 @@ def parse_term(name: str) -> "Term":
     if len(name) > MAX_NAME:
         raise _bad(name[:40] + "...", f"longer than {MAX_NAME} characters")
     try:
-        tree = ast.parse(name.strip(), mode="eval")
+        tree = parse_eval(name.strip())
     except SyntaxError as exc:
         raise _bad(name, f"syntax error ({exc.msg})") from None
     return Term(_convert(tree.body, name))
