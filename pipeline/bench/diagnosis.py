@@ -116,9 +116,10 @@ def grid(seeds: tuple[int, ...], *, quick: bool = False, n: int = N) -> list[Spe
                     i += 1
     for fam in OUT_OF_VOCABULARY:
         for base in SUPPORTED[fam]:
+            kinds = _kinds_for(fam, base)
             for noise in NOISE_LEVELS:
                 for s in seeds:
-                    specs.append(Spec(fam, base, s, MAGNITUDES[i % 3], noise, "white", INPUT_CYCLE[i % 3], n))
+                    specs.append(Spec(fam, base, s, MAGNITUDES[i % 3], noise, "white", kinds[i % len(kinds)], n))
                     i += 1
     return specs
 
@@ -408,8 +409,8 @@ def render(results: list[dict], meta: dict) -> str:
           "noise's sampling uncertainty on the validation record's input (`gain.ci95_meaning`): with the same "
           "input and fresh noise it should cover; with a fresh input the gain itself changes (other "
           "amplitudes and frequencies excite the effect differently), which one record cannot measure. Inputs that make a "
-          "family unidentifiable are not generated (saturation and dead zone of a two-level PRBS are a gain "
-          "change). Seeds: tuning seeds (0, 1, 2) for this table; test seeds (1000–1002) are reserved for the "
+          "family unidentifiable are not generated (saturation, dead zone and backlash of a two-level PRBS are "
+          "a gain change). Seeds: tuning seeds (0, 1, 2) for this table; test seeds (1000–1002) are reserved for the "
           "tests of issues 8 and 9.", "", END]
     return "\n".join(L) + "\n"
 

@@ -94,3 +94,23 @@ def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeyp
     assert r["status"] == "input_error" and r["label"] == "input_error" and "broken" in r["error"]
     s = bd.summarise([r])
     assert s["status"] == {"input_error": 1}
+
+
+def test_backlash_of_a_two_level_prbs_is_a_gain_change_so_it_is_not_generated():
+    """The play operator of a ±a PRBS is ±(a − w/2) after every switch: a dead zone's (or a gain's)
+    output, so no record can tell backlash from them, and the bench does not generate it (as for
+    saturation and dead zone of a PRBS)."""
+    import numpy as np
+
+    from pipeline.bench.independent.signals import Play, prbs
+    rng = np.random.default_rng(5)
+    u = prbs(rng, dt=0.01, n=2000, clock=7, std=1.0)
+    w = 0.8
+    t = np.arange(2000) * 0.01
+    raw = u.sample(t)[:, 0]
+    played = Play(u, w, t[-1], 0.01).sample(t)[:, 0]
+    first = int(np.argmax(np.abs(np.diff(raw)) > 0)) + 1        # after the first switch
+    np.testing.assert_allclose(played[first:], np.sign(raw[first:]) * (1.0 - w / 2), atol=1e-12)
+    assert not identifiable("backlash", "prbs", "msd")
+    assert not any(s.family == "backlash" and s.input_kind == "prbs" for s in bd.grid(bd.TUNE_SEEDS))
+    assert {s.input_kind for s in bd.grid(bd.TUNE_SEEDS) if s.family == "backlash"} == {"band", "held"}
