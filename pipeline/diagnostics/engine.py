@@ -439,10 +439,12 @@ class Diagnoser:
         linearisation is far off; each one left out says so in the history."""
         if len(todo) <= 1:
             return todo
-        prefit = [c for c in todo if c.fit is not None]     # refitted by its screen already: no cost
-        todo = [c for c in todo if c.fit is None]
+        # refitted by their screen already (no cost), or of a family whose linearised R² understates
+        # its refit (Family.screened False, e.g. a delay of several samples): always kept
+        always = [c for c in todo if c.fit is not None or not REGISTRY[c.hyp.family].screened]
+        todo = [c for c in todo if c.fit is None and REGISTRY[c.hyp.family].screened]
         if not todo:
-            return prefit
+            return always
         best = max(c.wald.r2 for c in todo)
         ranked = sorted(todo, key=lambda c: -c.wald.r2)
         keep = [c for c in ranked if c.wald.r2 >= REFIT_SHARE * best][:MAX_REFITS]
@@ -453,7 +455,7 @@ class Diagnoser:
                             + (f"under {REFIT_SHARE:g} x the {100 * best:.2g} % of the strongest candidate"
                                if c.wald.r2 < REFIT_SHARE * best else
                                f"and {MAX_REFITS} candidates explain more"))
-        return prefit + [c for c in todo if id(c) in kept]
+        return always + [c for c in todo if id(c) in kept]
 
     def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
         """The ``intersample`` pre-stage (see :mod:`.families.intersample`). An alternative rejected

@@ -114,6 +114,9 @@ class Family:
     # the hypothesis at its null is the current model (checked by the conformance test): the added-term
     # test then reuses the fit's simulation; additive terms are recognised without it
     null_is_current: bool = False
+    # the added-term test's R² approximates the refit's SSE drop, so the engine may skip the refit of a
+    # candidate explaining far less than the strongest one (engine._screen); False: always refitted
+    screened: bool = True
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         raise NotImplementedError
