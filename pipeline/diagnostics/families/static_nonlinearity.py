@@ -3,7 +3,8 @@ over the names the nominal equation already uses (its own physics, no coupling b
 
 * states z: ``z**2``, ``sqrt(z)`` (z > 0 on the simulated record: a square-root outflow), ``z*abs(z)``
   (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)`` (s the
-  state's spread; sign-changing states only, on a one-signed state it is the ``offset``);
+  state's spread; sign-changing states only, on a one-signed state it is the ``offset``; not of a
+  velocity either: an odd saturating law of the velocity is friction, ``coulomb_friction``);
 * inputs u: ``u**2`` (a lamp's power ∝ V²), ``abs(u)`` (sign-changing inputs), ``sqrt(u)`` (u > 0);
   none of them when it is affine in u on the estimation data (any g(u) of a two-level PRBS);
 * products ``z*u`` of a state and an input of the equation.
@@ -38,10 +39,13 @@ def library(ctx: Context, eq: str) -> list[str]:
         out.append(f"{z}**2")
         if np.all(x > 0):
             out.append(f"sqrt({z})")
-        if z not in ctx.structure.velocities or not ctx.structure.kin:
+        velocity = z in ctx.structure.velocities and ctx.structure.kin
+        if not velocity:
             out.append(f"{z}*abs({z})")
         s = float(np.std(x))
-        if s > 0 and min(np.mean(x > 0), np.mean(x < 0)) >= 0.05:   # tanh of a one-signed state is an offset
+        # tanh of a one-signed state is an offset; tanh of a velocity is a friction law (a smoothed
+        # sign(v)), which coulomb_friction and quadratic_damping own
+        if s > 0 and min(np.mean(x > 0), np.mean(x < 0)) >= 0.05 and not velocity:
             out.append(f"tanh({z}/{s:.6g})")
     for u in inputs:
         x = ctx.U[sl, m.inputs.index(u)]
