@@ -236,8 +236,9 @@ def _fresh_gain(spec: Spec, ctx, fresh_input: bool = True) -> float | None:
     return 1.0 - math.sqrt(sa / sb)
 
 
-def run_one(spec: Spec, workdir: str) -> dict:
-    """Generate one case, diagnose it, score it. Never raises."""
+def run_one(spec: Spec, workdir: str, coverage: bool = True) -> dict:
+    """Generate one case, diagnose it, score it (``coverage``: also the fresh-record gain coverage,
+    2 × ``FRESH`` generated records, most of a record's time). Never raises."""
     from ..config import load_config
     from ..errors import InputError
     from ..runs import analyse
@@ -273,7 +274,7 @@ def run_one(spec: Spec, workdir: str) -> dict:
         rec["parameter_error"] = parameter_error(truth, findings[0])
     if truth["kind"] == "null":
         rec["null"] = null_outcome(truth, findings)
-    if findings and findings[0].get("gain", {}).get("metric") == "validation_rmse_sim" \
+    if coverage and findings and findings[0].get("gain", {}).get("metric") == "validation_rmse_sim" \
             and findings[0]["family"] not in NOISE_FAMILIES:
         g = findings[0]["gain"]
         fg = _fresh_gain(spec, ctx)
@@ -435,17 +436,26 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="BENCHMARKS.md")
     ap.add_argument("--json", default=None, help="also write every record's result here")
     ap.add_argument("--limit", type=int, default=None, help="first N records of the grid only")
+    ap.add_argument("--only", default=None, help="comma-separated true families (or none, backlash, ...) only")
+    ap.add_argument("--noise", type=float, default=None, help="one noise level of the grid only (0.02 or 0.1)")
+    ap.add_argument("--no-coverage", action="store_true",
+                    help="skip the fresh-record coverage check (for iterating on top-1; not for the published table)")
     a = ap.parse_args(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
     seeds = TUNE_SEEDS if a.seeds == "tune" else TEST_SEEDS
-    specs = grid(seeds, quick=a.quick, n=a.n)[: a.limit]
+    specs = grid(seeds, quick=a.quick, n=a.n)
+    if a.only:
+        specs = [s for s in specs if s.family in a.only.split(",")]
+    if a.noise is not None:
+        specs = [s for s in specs if s.noise == a.noise]
+    specs = specs[: a.limit]
     print(f"[bench-diagnosis] {len(specs)} records, {a.workers} workers", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     work = tempfile.mkdtemp(prefix="bench-diagnosis-")
     results: list[dict] = []
     try:
         with ProcessPoolExecutor(max_workers=a.workers, mp_context=get_context("spawn")) as pool:
-            futs = [pool.submit(run_one, s, work) for s in specs]
+            futs = [pool.submit(run_one, s, work, not a.no_coverage) for s in specs]
             for i, f in enumerate(futs):
                 r = f.result()
                 results.append(r)
@@ -453,8 +463,10 @@ def main(argv=None) -> int:
                       f"({r.get('seconds_analyse', 0):.1f} s)", file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    partial = a.only or a.noise is not None or a.limit or a.no_coverage
     meta = {"command": "make bench-diagnosis" + (" QUICK=1" if a.quick else "") +
-                       (f" (--seeds {a.seeds})" if a.seeds != "tune" else ""),
+                       (f" (--seeds {a.seeds})" if a.seeds != "tune" else "") +
+                       (f" (partial: {' '.join((argv or sys.argv[1:]))})" if partial else ""),
             "date": time.strftime("%Y-%m-%d"), "n": a.n, "seeds": seeds, "seeds_name": a.seeds, "quick": a.quick,
             "workers": a.workers, "wall_s": time.perf_counter() - t0}
     section = render(results, meta)
