@@ -7,7 +7,7 @@ under test, and every truth is a closed form: the null of no added term, a relat
 
 Measured with the code this replaced (same designs): Wald rejected 5.0 % / 6.8 % at nominal 1 % and
 12 % / 14 % at 5 % for φ = 0.9 / 0.97; the block-bootstrap gain interval covered 91 % / 89 % / 76 % at
-φ = 0 / 0.9 / 0.98; Fisher's g rejected every AR(1) φ = 0.8 record; σ̂²(JᵀJ)⁻¹ covered 48 % at φ = 0.9.
+φ = 0 / 0.9 / 0.98 (and the Diebold–Mariano interval after it was uninformative on bursty misfits); Fisher's g rejected every AR(1) φ = 0.8 record; σ̂²(JᵀJ)⁻¹ covered 48 % at φ = 0.9.
 """
 
 from __future__ import annotations
@@ -69,22 +69,64 @@ def test_added_terms_wald_still_detects_a_real_term_in_smooth_residuals():
 
 
 # ----------------------------------------------------------------------------------- gain interval
+def _fixed_misfit(n: int, shape: str, rms: float, seed: int) -> np.ndarray:
+    """A smooth, input-driven misfit that stays the same over the Monte Carlo records (the validation
+    input and the fitted models are fixed; only the output noise is drawn anew). ``smooth``: AR(1) 0.97;
+    ``burst``: what a saturation at 1.5 sd removes from an AR(1) 0.95 input, through a first-order lag
+    (pole 0.98): zero most of the time, smooth bursts otherwise."""
+    if rms == 0.0:
+        return np.zeros(n)
+    w = np.random.default_rng(seed).standard_normal(n + 2000)
+    if shape == "smooth":
+        x = lfilter([1.0], [1.0, -0.97], w)[2000:]
+    else:
+        u = lfilter([1.0], [1.0, -0.95], w)
+        u /= np.std(u)
+        x = lfilter([0.02], [1.0, -0.98], np.sign(u) * np.maximum(np.abs(u) - 1.5, 0.0))[2000:]
+    return rms * x / np.sqrt(np.mean(x * x))
+
+
 @pytest.mark.parametrize("phi", [0.0, 0.9, 0.98])
-def test_gain_interval_covers_the_true_relative_gain(phi):
-    """after = 0.8·before + 0.3·(independent AR(1) with the same φ): true gain 1 − √0.73; 600
-    records of N = 1000; the interval also brackets the reported ``relative``."""
-    rng = np.random.default_rng([11, int(100 * phi)])
-    c, s, reps = 0.8, 0.3, 600
-    truth = 1.0 - math.sqrt(c * c + s * s)
+@pytest.mark.parametrize("shape, rms_b, rms_a", [("smooth", 1.0, 0.0), ("smooth", 0.3, 0.1), ("smooth", 0.05, 0.0),
+                                                 ("burst", 2.4, 0.0), ("smooth", 0.0, 0.0)])
+def test_gain_interval_covers_the_gain_on_fresh_noise_with_the_same_input(phi, shape, rms_b, rms_a):
+    """The setting the interval claims (``gain.ci95_meaning``): before = d_b + e and after = d_a + e with
+    fixed misfits d_b, d_a and AR(1) φ noise e of sd 0.2 drawn anew in each of 400 records, N = 1000.
+    Truth in closed form: 1 − √((mean d_a² + σ²)/(mean d_b² + σ²)), what pooling fresh records with
+    the same input gives. Coverage ≥ 93 %, and the interval brackets the reported ``relative``."""
+    n, sd, reps = 1000, 0.2, 400
+    db, da = _fixed_misfit(n, shape, rms_b, 7), _fixed_misfit(n, "smooth", rms_a, 8)
+    s2 = sd * sd
+    truth = 1.0 - math.sqrt((np.mean(da ** 2) + s2) / (np.mean(db ** 2) + s2))
+    rng = np.random.default_rng([11, int(100 * phi), int(100 * rms_b)])
     cover = 0
     for _ in range(reps):
-        x = _ar(rng, phi, (1000, 2), 1000)
-        g = gain_ci(x[:, :1], c * x[:, :1] + s * x[:, 1:])
+        e = _ar(rng, phi, n, 1000) * sd * math.sqrt(1.0 - phi * phi)
+        g = gain_ci((db + e)[:, None], (da + e)[:, None])
         lo, hi = g["ci95"]
         assert lo <= g["relative"] <= hi and hi < 1.0
         assert g["relative"] == pytest.approx(1.0 - g["after"] / g["before"], rel=1e-12)
         cover += lo <= truth <= hi
     assert cover / reps >= 0.93
+
+
+@pytest.mark.parametrize("phi, share", [(0.0, 1.0), (0.9, 1.0), (0.98, 0.8)])
+def test_gain_interval_is_informative_when_the_extension_removes_a_bursty_misfit(phi, share):
+    """A saturation-shaped misfit (``burst``) of 12× the noise sd, removed by the extension (true gain
+    0.92): the lower bound exceeds 0.5 in every one of 100 records at φ = 0 and 0.9, and in ≥ 80 % at
+    φ = 0.98 (measured 91 %; about 20 effective samples per record there). The Diebold–Mariano form
+    this replaced, which counts the fixed δ_t² of the loss differential as noise, did so in 13 % at
+    φ = 0.98, with bounds of −99; on an input saturation of the independent bench (validation RMSE
+    −91 %, lag-1 autocorrelation of the nominal residual 0.997) it gave [−99, 0.99] and the finding
+    was rejected."""
+    n, sd = 1000, 0.2
+    db = _fixed_misfit(n, "burst", 12 * sd, 9)
+    rng = np.random.default_rng([12, int(100 * phi)])
+    lows = []
+    for _ in range(100):
+        e = _ar(rng, phi, n, 1000) * sd * math.sqrt(1.0 - phi * phi)
+        lows.append(gain_ci((db + e)[:, None], e[:, None])["ci95"][0])
+    assert np.mean(np.array(lows) > 0.5) >= share
 
 
 def test_mean_interval_of_the_noise_stage_covers_under_ar1():
