@@ -10,7 +10,8 @@
 3. For every family that fires, its best hypothesis is added and the model refitted. It is accepted
    only if the validation free-run RMSE falls with a 95 % interval of the relative gain above zero
    (:mod:`.gain`) **and** a likelihood-ratio test with the effective sample size N(1 − ρ̂)/(1 + ρ̂)
-   on the estimation part rejects the current model at ``alpha`` (:func:`stats.lr_test`); ΔBIC is
+   (ρ̂ of the refitted residual) on the estimation part rejects the current model at ``alpha``
+   (:func:`stats.lr_test`); ΔBIC is
    kept as information.
 4. The accepted extension with the lowest ΔBIC is the finding; the extended model becomes the model
    and the loop repeats, up to ``max_findings`` causes.
@@ -360,7 +361,7 @@ class Diagnoser:
         if f is None:
             return best
         lr = stats.lr_test(fit.sse_w, f.sse_w, fit.resid_est.size, f.n_params - fit.n_params,
-                           stats.lag1(fit.resid_est), self.alpha)
+                           stats.lag1(f.resid_est), self.alpha)
         p = min(1.0, 2.0 * lr.p_value)
         if p >= best.p_family:
             return best
@@ -484,7 +485,7 @@ class Diagnoser:
             g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
             dbic = bic_of(f) - bic0
             lr = stats.lr_test(nominal.sse_w, f.sse_w, nominal.resid_est.size, f.n_params - nominal.n_params,
-                               stats.lag1(nominal.resid_est), self.alpha)
+                               stats.lag1(f.resid_est), self.alpha)
             ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
@@ -562,7 +563,7 @@ class Diagnoser:
                 c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
                 c.delta_bic = bic_of(c.fit) - bic0
                 lr = stats.lr_test(current.sse_w, c.fit.sse_w, current.resid_est.size,
-                                   c.fit.n_params - current.n_params, stats.lag1(current.resid_est), self.alpha)
+                                   c.fit.n_params - current.n_params, stats.lag1(c.fit.resid_est), self.alpha)
                 c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
                     "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0
