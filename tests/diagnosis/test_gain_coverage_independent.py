@@ -6,10 +6,13 @@ The interval says (``gain.ci95_meaning``) that it is the sampling uncertainty of
 validation record's input. So the reference is the gain of the same two fitted models on 16 records
 with the *same input* and fresh noise, pooled over the same validation window (the bench's
 ``_fresh_gain(..., fresh_input=False)``), whose own sampling error is 1/4 of one record's. Test seeds
-(1000–1002 are the issue's; 1010–1019 here), three families, 30 records: an exactly calibrated 95 %
-interval covers the pooled reference with probability 94.3 %; ≥ 28 of 30 (93 %, the issue's bound) is
-asserted. Measured when written: 30/30 (the interval is conservative: it also treats the input-driven
-variation of the loss differential as random).
+(1000–1002 are the issue's; 1010–1029 here), three families, 60 records. An exactly calibrated 95 %
+interval covers the pooled reference with probability 94.3 %, so a bare "≥ 93 % of the records" would
+fail a calibrated interval about once in four record sets (it was set for the earlier, conservative
+interval, which covered 30/30 of the first 30). Asserted instead: a one-sided exact binomial test does
+not reject "coverage ≥ 93 %" at 5 % (it rejects at 51 of 60 or fewer), and every finding's interval
+brackets its own ``relative``. Measured when written: 55 of 60 (91.7 %; binomial p = 0.41), the five
+misses by at most 0.0011 in the gain.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import io
 from pathlib import Path
 
 import pytest
+from scipy.stats import binomtest
 
 from pipeline.bench.diagnosis import Spec, _fresh_gain
 from pipeline.bench.independent.case import make_case
@@ -26,7 +30,7 @@ from pipeline.config import load_config
 from pipeline.runs import analyse
 
 CASES = [("offset", "msd"), ("cubic_stiffness", "pendulum"), ("input_saturation", "msd")]
-SEEDS = range(1010, 1020)
+SEEDS = range(1010, 1030)
 
 
 def coverage(tmp_path: Path) -> tuple[int, int, list]:
@@ -46,6 +50,7 @@ def coverage(tmp_path: Path) -> tuple[int, int, list]:
             ref = _fresh_gain(spec, ctx, fresh_input=False)
             assert ref is not None
             lo, hi = g["ci95"]
+            assert lo <= g["relative"] <= hi
             total += 1
             covered += lo <= ref <= hi
             rows.append((family, seed, round(lo, 4), round(g["relative"], 4), round(hi, 4), round(ref, 4)))
@@ -55,5 +60,5 @@ def coverage(tmp_path: Path) -> tuple[int, int, list]:
 @pytest.mark.slow
 def test_gain_interval_covers_the_gain_on_fresh_noise_with_the_same_input(tmp_path: Path):
     covered, total, rows = coverage(tmp_path)
-    assert total >= 27, rows                       # nearly every record has a first finding
-    assert covered >= 0.93 * total, rows
+    assert total >= 54, rows                       # nearly every record has a first finding
+    assert binomtest(covered, total, 0.93, alternative="less").pvalue >= 0.05, (covered, total, rows)
