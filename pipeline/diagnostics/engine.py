@@ -104,6 +104,14 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     return r if r.shape[1] == 1 else r / output_scales(prob)
 
 
+def lr_against(current: FitResult, refit: FitResult, alpha: float) -> stats.TestResult:
+    """The likelihood-ratio test of ``refit`` against the ``current`` model it extends, on the estimation
+    part, with the effective sample size from the **refit's** residual (:func:`stats.lr_test`: the
+    current residual carries the missing effect itself and would leave N_eff < 1 on a large smooth one)."""
+    return stats.lr_test(current.sse_w, refit.sse_w, current.resid_est.size, refit.n_params - current.n_params,
+                         stats.lag1(refit.resid_est), alpha)
+
+
 def _pooled(g: dict, ny: int) -> dict:
     if ny > 1:
         g["metric"] = "validation_nrmse_sim_pooled"
@@ -360,8 +368,7 @@ class Diagnoser:
         f = self.estimate(fit, cand)
         if f is None:
             return best
-        lr = stats.lr_test(fit.sse_w, f.sse_w, fit.resid_est.size, f.n_params - fit.n_params,
-                           stats.lag1(f.resid_est), self.alpha)
+        lr = lr_against(fit, f, self.alpha)
         p = min(1.0, 2.0 * lr.p_value)
         if p >= best.p_family:
             return best
@@ -484,8 +491,7 @@ class Diagnoser:
                 continue
             g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
             dbic = bic_of(f) - bic0
-            lr = stats.lr_test(nominal.sse_w, f.sse_w, nominal.resid_est.size, f.n_params - nominal.n_params,
-                               stats.lag1(f.resid_est), self.alpha)
+            lr = lr_against(nominal, f, self.alpha)
             ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
@@ -562,8 +568,7 @@ class Diagnoser:
                     continue
                 c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
                 c.delta_bic = bic_of(c.fit) - bic0
-                lr = stats.lr_test(current.sse_w, c.fit.sse_w, current.resid_est.size,
-                                   c.fit.n_params - current.n_params, stats.lag1(c.fit.resid_est), self.alpha)
+                lr = lr_against(current, c.fit, self.alpha)
                 c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
                     "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0
