@@ -274,6 +274,26 @@ def test_lr_test_keeps_its_power_when_the_missing_term_is_large_and_smooth(phi):
     assert np.mean(np.array(p_cur) < 0.01) < 0.5
 
 
+def test_the_engine_takes_the_effective_sample_size_from_the_refit():
+    """``engine.lr_against``, the acceptance test the loop, the intersample stage and the LR screen use:
+    the current residual is a 48-sd sinusoid plus AR(1) 0.5 noise, the refit's residual the noise.
+    The refit is accepted (p < 1e-6) and N_eff is the noise's, N(1 − ρ)/(1 + ρ) with ρ ≈ 0.5; with ρ̂
+    of the current residual N_eff would be about one sample."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnostics.engine import lr_against
+    rng = np.random.default_rng(20)
+    n, t = 1400, np.arange(1400)
+    e = _ar(rng, 0.5, n) * math.sqrt(1.0 - 0.25)
+    r0 = (48.0 * math.sqrt(2.0) * np.sin(2 * np.pi * t / 190) + e)[:, None]
+    fit = lambda r, k: SimpleNamespace(sse_w=float(np.sum(r * r)), resid_est=r, theta=np.zeros(k), n_params=k)
+    lr = lr_against(fit(r0, 2), fit(e[:, None], 5), 0.01)
+    n_eff = float(lr.detail.split("N_eff = ")[1])
+    rho = stats.lag1(e)
+    assert 0.4 < rho < 0.6 and n_eff == pytest.approx(n * (1 - rho) / (1 + rho), rel=1e-3)
+    assert lr.p_value < 1e-6
+
+
 def test_lr_test_closed_form():
     """N_eff = N(1 − ρ)/(1 + ρ); LR = N_eff ln(RSS0/RSS1) ~ χ²_q."""
     r = stats.lr_test(10.0, 8.0, 1000, 2, 0.5)
