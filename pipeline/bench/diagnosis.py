@@ -433,7 +433,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", choices=("tune", "test"), default="tune")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--n", type=int, default=N, help="samples per record")
-    ap.add_argument("--out", default="BENCHMARKS.md")
+    ap.add_argument("--out", default=None,
+                    help="markdown file whose bench section is replaced (default BENCHMARKS.md for a full run; "
+                         "a partial run writes only where asked)")
     ap.add_argument("--json", default=None, help="also write every record's result here")
     ap.add_argument("--limit", type=int, default=None, help="first N records of the grid only")
     ap.add_argument("--only", default=None, help="comma-separated true families (or none, backlash, ...) only")
@@ -445,10 +447,24 @@ def main(argv=None) -> int:
     seeds = TUNE_SEEDS if a.seeds == "tune" else TEST_SEEDS
     specs = grid(seeds, quick=a.quick, n=a.n)
     if a.only:
+        known = sorted({s.family for s in specs})
+        unknown = [f for f in a.only.split(",") if f not in known]
+        if unknown:
+            ap.error(f"--only: unknown {', '.join(unknown)}; expected some of {', '.join(known)}")
         specs = [s for s in specs if s.family in a.only.split(",")]
     if a.noise is not None:
+        if a.noise not in NOISE_LEVELS:
+            ap.error(f"--noise: {a.noise:g} is not a level of the grid; expected one of "
+                     f"{', '.join(f'{x:g}' for x in NOISE_LEVELS)}")
         specs = [s for s in specs if s.noise == a.noise]
     specs = specs[: a.limit]
+    partial_args = ([f"--only {a.only}"] if a.only else []) + ([f"--noise {a.noise:g}"] if a.noise is not None else []) \
+        + ([f"--limit {a.limit}"] if a.limit else []) + (["--no-coverage"] if a.no_coverage else [])
+    partial = bool(partial_args)
+    for opt, path in (("--json", a.json), ("--out", a.out)):
+        if path and not Path(path).resolve().parent.is_dir():
+            ap.error(f"{opt}: the folder of {path} does not exist")
+    out = a.out or (None if partial else "BENCHMARKS.md")
     print(f"[bench-diagnosis] {len(specs)} records, {a.workers} workers", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     work = tempfile.mkdtemp(prefix="bench-diagnosis-")
@@ -463,19 +479,20 @@ def main(argv=None) -> int:
                       f"({r.get('seconds_analyse', 0):.1f} s)", file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    partial = a.only or a.noise is not None or a.limit or a.no_coverage
     meta = {"command": "make bench-diagnosis" + (" QUICK=1" if a.quick else "") +
                        (f" (--seeds {a.seeds})" if a.seeds != "tune" else "") +
-                       (f" (partial: {' '.join((argv or sys.argv[1:]))})" if partial else ""),
+                       (f" (partial: {' '.join(partial_args)})" if partial else ""),
             "date": time.strftime("%Y-%m-%d"), "n": a.n, "seeds": seeds, "seeds_name": a.seeds, "quick": a.quick,
             "workers": a.workers, "wall_s": time.perf_counter() - t0}
     section = render(results, meta)
     print(section)
-    write_section(Path(a.out), section)
+    if out:
+        write_section(Path(out), section)
     if a.json:
         Path(a.json).write_text(json.dumps({"meta": meta, "summary": summarise(results), "records": results},
                                            indent=1, default=str))
-    print(f"wrote {a.out}", file=sys.stderr)
+    print(f"wrote {out}" if out else "partial run: BENCHMARKS.md left as it is (--out FILE to write the section)",
+          file=sys.stderr)
     return 0
 
 

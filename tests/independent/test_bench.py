@@ -83,6 +83,9 @@ def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeyp
     assert r["status"] == "ok" and r["truth"]["family"] == "offset"
     assert r["label"] == "offset" and r["parameter_error"]["equation"]["ok"]
     assert 0 < r["seconds_analyse"] < 120
+    assert "coverage" in r and "coverage_same_input" in r
+    quick = bd.run_one(spec, str(tmp_path), coverage=False)            # --no-coverage: same answer, no check
+    assert quick["label"] == "offset" and "coverage" not in quick and "coverage_same_input" not in quick
     assert not (tmp_path / r["name"]).exists()                        # the case folder is cleaned up
 
     import pipeline.runs
@@ -94,6 +97,30 @@ def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeyp
     assert r["status"] == "input_error" and r["label"] == "input_error" and "broken" in r["error"]
     s = bd.summarise([r])
     assert s["status"] == {"input_error": 1}
+
+
+@pytest.mark.parametrize("args, says", [(["--only", "offset,frobnication"], "--only: unknown frobnication"),
+                                        (["--noise", "0.05"], "--noise: 0.05 is not a level of the grid"),
+                                        (["--json", "/no/such/folder/r.json"], "--json: the folder of")])
+def test_bad_bench_options_stop_before_any_record_with_exit_2(args, says, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        bd.main(args)
+    assert e.value.code == 2 and says in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_partial_run_leaves_benchmarks_md_alone_unless_asked(tmp_path, monkeypatch):
+    """--only/--noise/--limit/--no-coverage make a partial table: it is printed, and written only to an
+    explicit --out (the published section of BENCHMARKS.md is the full grid's)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "BENCHMARKS.md").write_text("# Benchmarks\n")
+    part = ["--only", "none", "--noise", "0.02", "--limit", "1", "--no-coverage", "--workers", "1", "--n", "600"]
+    assert bd.main(part) == 0
+    assert (tmp_path / "BENCHMARKS.md").read_text() == "# Benchmarks\n"
+    assert bd.main(part + ["--out", "part.md"]) == 0
+    text = (tmp_path / "part.md").read_text()
+    assert "(partial: --only none --noise 0.02 --limit 1 --no-coverage)" in text and "1 records" in text
 
 
 def test_backlash_of_a_two_level_prbs_is_a_gain_change_so_it_is_not_generated():
