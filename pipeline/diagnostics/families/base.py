@@ -104,6 +104,10 @@ class Hypothesis:
     parameter: str | None = None
     state: str | None = None
     info: dict = field(default_factory=dict)
+    # the extension equals the current model before this time whatever its coefficients (a jump at
+    # t_j): the added-term test then simulates the perturbed model only from there, resumed from the
+    # current model's own simulated state (the rows before are the fit's own simulation)
+    acts_from: float | None = None
 
 
 class Family:

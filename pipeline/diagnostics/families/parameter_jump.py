@@ -1,7 +1,10 @@
 """``parameter_jump``: a free parameter changes abruptly at t_j, p → p + Δ·step(t − t_j).
 
 Hypotheses: every free nominal parameter × t_j on a grid of ``GRID`` times inside the estimation window
-(Δ tested at 0 with t_j fixed; the family's p-value is Bonferroni over all of them). Estimate: the best
+(Δ tested at 0 with t_j fixed; the family's p-value is Bonferroni over all of them). The times of one
+parameter form a screen group: only the time whose sensitivity explains most of the residual gets the
+full test (``Diagnoser.screened_out``), and each sensitivity is simulated from t_j on only
+(``Hypothesis.acts_from``). Estimate: the best
 grid time, then a golden-section search on t_j between its neighbours (each point a refit of Δ and the
 free parameters), t_j fixed in the final refit."""
 
@@ -32,8 +35,8 @@ class ParameterJump(Family):
             for g in grid:
                 out.append(Hypothesis(self.id, f"{self.id}:{k}@{g:.4g}", coefs=[d], extra_params={tj: float(g)},
                                       param_rewrites=[Rewrite(self.id, k, f"{k} + {d}*step(t - {tj})")],
-                                      fixed=(tj,), parameter=k,
-                                      info={"grid_step": float(grid[1] - grid[0]),
+                                      fixed=(tj,), parameter=k, acts_from=float(g),
+                                      info={"grid_step": float(grid[1] - grid[0]), "screen_group": k,
                                             "scale": abs(m.params[k]) or 1.0}))
         return out
 
@@ -44,7 +47,7 @@ class ParameterJump(Family):
         d0 = float(cand.wald.beta[0])
 
         def refit(tj):
-            h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}})
+            h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
             try:
                 return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, max_nfev=60)
             except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
