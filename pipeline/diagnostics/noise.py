@@ -190,8 +190,28 @@ def block_ci(d: np.ndarray, rng: np.random.Generator | None = None, n_boot: int 
     with the prewhitened EWC long-run variance and Student t_ν of :func:`.gain.mean_interval`
     (Diebold & Mariano 1995; Lazarus, Lewis, Stock & Watson 2018). It replaces a moving-block bootstrap
     with blocks of ⌈√n⌉ that under-covered on smooth residuals; ``rng`` and ``n_boot`` are no longer
-    used (kept for the call signature)."""
-    return mean_interval(d, base)
+    used (kept for the call signature).
+
+    Without ``base`` the **lower** bound is that of the mean of min(d_t, c), c the ``TRUNC_Q`` sample
+    quantile of d: E min(d, c) ≤ E d, so it is a valid (conservative) lower bound for the mean, and
+    it has a finite variance when d does not. d_t is a drop of the Gaussian log score, which holds
+    e_t²: with Student-t noise of ν ≤ 4 degrees of freedom var(e²) is infinite, the plain interval's
+    width is set by a few outliers, and a t-noise refit whose drop was 0.55 per sample got
+    [−0.25, 1.35] (a heavy-tailed bench record named ``none``). Monte Carlo (1400 estimation, 600
+    validation samples, 300 records each, t fitted by :func:`fit_student_t`): acceptance (lower bound
+    > 0) under Gaussian noise 1.0 % for both bounds; with t noise of ν = 2.5 / 3 / 4 / 5 / 10 it rose
+    from 85 / 85 / 80 / 63 / 15 % (plain) to 100 / 100 / 93 / 71 / 16 %; the lower bound stayed below
+    the true conditional mean drop in ≥ 99 % of records (``tests/test_noise_families.py``). The upper
+    bound is the plain one (truncation would bias it down)."""
+    if base is not None:
+        return mean_interval(d, base)
+    d = np.asarray(d, float)
+    hi = mean_interval(d)[1]
+    lo = mean_interval(np.minimum(d, np.quantile(d, TRUNC_Q)))[0] if len(d) >= 8 else hi
+    return [min(lo, float(np.mean(d))), hi]
+
+
+TRUNC_Q = 0.995   # the largest 0.5 % of the per-sample drops are truncated for the lower bound
 
 
 # ---------------------------------------------------------------- refits
@@ -561,6 +581,12 @@ def diagnose_noise(fit: FitResult, prob: Problem, *, alpha: float, seed: int, n_
         if ny > 1:
             g["outputs"] = "joint NLL per sample, summed over the outputs " + ", ".join(names)
         if not (g["absolute_ci95"][0] > 0 and dbic < 0):
+            # fitted and rejected: say so, with the numbers (a fired family must not vanish silently)
+            why = ("its validation NLL drop's 95 % interval includes 0" if g["absolute_ci95"][0] <= 0
+                   else "BIC does not fall")
+            tests.append(TestResult(f"{fam}_fix", g["absolute"], float("nan"), None, False,
+                                    f"fitted, not accepted: {why} (validation NLL drop {g['absolute']:.3g} per "
+                                    f"sample, 95 % CI {abs_ci[0]:.3g} to {abs_ci[1]:.3g}; ΔBIC {dbic:.1f})"))
             continue
         std = np.sqrt(np.clip(np.diag(fx.cov), 0, None))
         ev = [{"test": per[j][fi].name, "statistic": per[j][fi].statistic, "p_value": per[j][fi].p_value}
