@@ -108,12 +108,15 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     return r if r.shape[1] == 1 else r / output_scales(prob)
 
 
-def lr_against(current: FitResult, refit: FitResult, alpha: float) -> stats.TestResult:
+def lr_against(current: FitResult, refit: FitResult, alpha: float, searched: int = 0) -> stats.TestResult:
     """The likelihood-ratio test of ``refit`` against the ``current`` model it extends, on the estimation
     part, with the effective sample size from the **refit's** residual (:func:`stats.lr_test`: the
-    current residual carries the missing effect itself and would leave N_eff < 1 on a large smooth one)."""
-    return stats.lr_test(current.sse_w, refit.sse_w, current.resid_est.size, refit.n_params - current.n_params,
-                         stats.lag1(refit.resid_est), alpha)
+    current residual carries the missing effect itself and would leave N_eff < 1 on a large smooth one).
+    ``searched``: parameters the family estimated by a search and held fixed in the refit (a jump's
+    time), counted in the degrees of freedom: a conservative stand-in for the supremum-LR law of an
+    estimated change point (Andrews 1993, Econometrica 61(4)), which is more spread than χ²₁."""
+    return stats.lr_test(current.sse_w, refit.sse_w, current.resid_est.size,
+                         refit.n_params - current.n_params + searched, stats.lag1(refit.resid_est), alpha)
 
 
 def _pooled(g: dict, ny: int) -> dict:
@@ -131,8 +134,11 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / np.linalg.norm(y - y.mean(axis=0))))
 
 
-def bic_of(fit: FitResult) -> float:
-    return criteria.bic(fit.resid_est, fit.n_params)
+def bic_of(fit: FitResult, searched: int = 0) -> float:
+    """BIC of the fit on the estimation part; ``searched`` parameters estimated by a search and held
+    fixed in the refit (a jump's time) count like the fitted ones (Schwarz 1978: k is every estimated
+    parameter; uncounted, a jump at a searched time beat a drift with as many fitted parameters)."""
+    return criteria.bic(fit.resid_est, fit.n_params + searched)
 
 
 def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
@@ -468,7 +474,7 @@ class Diagnoser:
         f = self.estimate(fit, cand)
         if f is None:
             return best
-        lr = lr_against(fit, f, self.alpha)
+        lr = lr_against(fit, f, self.alpha, len(lr_h.searched))
         p = min(1.0, 2.0 * lr.p_value)
         if p >= best.p_family:
             return best
@@ -698,8 +704,8 @@ class Diagnoser:
                     c.reason = c.reason or "no extension estimated"
                     continue
                 c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
-                c.delta_bic = bic_of(c.fit) - bic0
-                lr = lr_against(current, c.fit, self.alpha)
+                c.delta_bic = bic_of(c.fit, len(c.hyp.searched)) - bic0
+                lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
                 c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
                     "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0

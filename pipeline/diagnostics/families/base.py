@@ -108,6 +108,9 @@ class Hypothesis:
     # t_j): the added-term test then simulates the perturbed model only from there, resumed from the
     # current model's own simulated state (the rows before are the fit's own simulation)
     acts_from: float | None = None
+    # new parameters the family estimates by a search and holds fixed in the refit (a jump's time):
+    # counted as estimated parameters in ΔBIC and in the likelihood-ratio test's degrees of freedom
+    searched: tuple[str, ...] = ()
 
 
 class Family:

@@ -6,7 +6,8 @@ parameter form a screen group: only the time whose sensitivity explains most of 
 full test (``Diagnoser.screened_out``), and each sensitivity is simulated from t_j on only
 (``Hypothesis.acts_from``). Estimate: the best
 grid time, then a golden-section search on t_j between its neighbours (each point a refit of Δ and the
-free parameters), t_j fixed in the final refit."""
+free parameters), t_j fixed in the final refit and counted as an estimated parameter
+(``Hypothesis.searched``) in ΔBIC and the likelihood-ratio test."""
 
 import numpy as np
 
@@ -35,7 +36,7 @@ class ParameterJump(Family):
             for g in grid:
                 out.append(Hypothesis(self.id, f"{self.id}:{k}@{g:.4g}", coefs=[d], extra_params={tj: float(g)},
                                       param_rewrites=[Rewrite(self.id, k, f"{k} + {d}*step(t - {tj})")],
-                                      fixed=(tj,), parameter=k, acts_from=float(g),
+                                      fixed=(tj,), searched=(tj,), parameter=k, acts_from=float(g),
                                       info={"grid_step": float(grid[1] - grid[0]), "screen_group": k,
                                             "scale": abs(m.params[k]) or 1.0}))
         return out
