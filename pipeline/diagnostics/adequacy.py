@@ -7,7 +7,15 @@ Adequacy tests on the estimation residual of every output against every input (e
 * ``model_error_model``: the residual regressed on ``FIR_ORDER`` lagged inputs (the model-error model of
   Ljung 1999 §16.6, MATLAB ``resid(...,'fr')``), a HAC Wald test that all FIR coefficients are zero
   (Newey–West with Andrews' bandwidth, :func:`stats.added_terms_test`): an output-error residual of a
-  correct structure holds no input dynamics, whatever its colour.
+  correct structure holds no input dynamics, whatever its colour;
+* ``input_direction``: the residual regressed on the model's own response to an input perturbation
+  proportional to the direction of the input's last change, d_t = sign(u_t − u_s) at the last s < t
+  with u_s ≠ u_t (:func:`input_direction_test`). A play (backlash) of width w in the actuator makes the
+  applied input u − (w/2)·d_t once the play is taken up (Tao & Kokotović 1996, *Adaptive Control of
+  Systems with Actuator and Sensor Nonlinearities*, Wiley, §2.2, eq. 2.7), and rate-independent
+  hysteresis on the input adds a term of the same sign pattern; neither is a linear function of the
+  input, so the model-error model above cannot see it, and the residual it leaves is smooth and
+  easily taken for coloured noise.
 
 A model that fails them has a structural error; when no family's extension removes it the verdict is
 ``unexplained_discrepancy`` (contract §3), never "no discrepancy", and the noise families are not tested
@@ -18,9 +26,12 @@ largest error.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy.stats import chi2, norm
 
+from ..fit import simulate_until
 from . import stats
 
 FIR_ORDER = 15
@@ -63,21 +74,83 @@ def model_error_model(e: np.ndarray, u: np.ndarray, alpha: float, order: int = F
     return t
 
 
+def direction_signal(u: np.ndarray) -> np.ndarray:
+    """d_t = sign of the input's last change before or at t (+1 rising, −1 falling; 0 before its first
+    change, where the direction is unknown); changes smaller than 1e-9 of its range are no change."""
+    du = np.diff(u, prepend=u[0])
+    tol = 1e-9 * (float(np.ptp(u)) or 1.0)
+    s = np.where(du > tol, 1.0, np.where(du < -tol, -1.0, 0.0))
+    idx = np.where(s != 0, np.arange(len(s)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    return s[idx]
+
+
+DIRECTION_MIN_SWITCHES = 4
+
+
+def input_direction_sensitivity(fit, prob, j: int) -> np.ndarray | None:
+    """(n_est, ny) response of the fitted simulation to the perturbation u_j → u_j + ε·d̃_t (d̃ the
+    direction signal, centred and scaled on the estimation part), by a forward difference; None when
+    the direction carries nothing beyond the input itself (a two-level input: d_t = sign(u_t − ū)), the
+    input changes direction fewer than ``DIRECTION_MIN_SWITCHES`` times, or the model cannot be simulated."""
+    sl = prob.split.est_slice()
+    u = prob.U[:, j]
+    d = direction_signal(u)
+    de = d[sl]
+    if np.count_nonzero(np.diff(de)) < DIRECTION_MIN_SWITCHES:
+        return None
+    known = de != 0
+    X = np.column_stack([np.ones(int(known.sum())), u[sl][known]])
+    r = de[known] - X @ np.linalg.lstsq(X, de[known], rcond=None)[0]
+    if np.std(r) < 1e-3 * (np.std(de[known]) or 1.0):
+        return None
+    v = (d - de.mean()) / np.std(de)
+    eps = 1e-4 * (float(np.std(u[sl])) or 1.0)
+    stop = prob.split.est[1]
+    base = simulate_until(fit.model, prob, fit.x0, stop)
+    U1 = prob.U.copy()
+    U1[:, j] = u + eps * v
+    pert = simulate_until(fit.model, dataclasses.replace(prob, U=U1), fit.x0, stop)
+    if base is None or pert is None:
+        return None
+    S = (pert - base)[prob.split.est[0]:] / eps
+    return S if np.all(np.isfinite(S)) and np.any(S) else None
+
+
+def input_direction_test(fit, prob, i: int, j: int, S: np.ndarray, alpha: float) -> stats.TestResult:
+    """HAC Wald test (:func:`stats.added_terms_test`: feasible GLS, fixed-b) of the direction
+    sensitivity S[:, i] in the residual of output i, beyond the fitted parameters' sensitivities."""
+    ny = fit.resid_est.shape[1]
+    e = fit.resid_est[:, i]
+    J = fit.jac[i::ny] if fit.jac is not None and fit.jac.size else np.zeros((len(e), 0))
+    w = stats.added_terms_test(e, J, S[:, i:i + 1])
+    t = stats.TestResult("input_direction", w.statistic, w.p_value, None, w.p_value >= alpha,
+                         f"HAC Wald test of the model's response to an input term following the direction of "
+                         f"the input's last change (backlash, play or hysteresis in the actuator); it explains "
+                         f"{100 * w.r2:.2g} % of the residual")
+    t.r2 = w.r2
+    return t
+
+
 def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
-    """Every output × every input; the level of each is α / (number of pairs × 2 tests)."""
+    """Every output × every input; the level of each is α / (number of pairs × 3 tests)."""
     sl = prob.split.est_slice()
     pairs = [(i, j) for i in range(fit.resid_est.shape[1]) for j in range(prob.U.shape[1])
              if np.ptp(prob.U[sl, j]) > 0]
     if not pairs:
         return []
-    a = alpha / (2 * len(pairs))
+    a = alpha / (3 * len(pairs))
+    sens = {j: input_direction_sensitivity(fit, prob, j) for j in sorted({j for _, j in pairs})}
     out = []
     for i, j in pairs:
         e, u = fit.resid_est[:, i], prob.U[sl, j]
         tag = f"[{fit.model.inputs[j]}->{prob.out_names[i]}]" if len(pairs) > 1 else ""
         xc = stats.input_crosscorr(e, u, 25, a)
         xc.r2 = xc.statistic ** 2          # the share of the residual one lag of the input explains
-        for t in (xc, model_error_model(e, u, a)):
+        tests = [xc, model_error_model(e, u, a)]
+        if sens[j] is not None:
+            tests.append(input_direction_test(fit, prob, i, j, sens[j], a))
+        for t in tests:
             t.name += tag
             out.append(t)
     return out

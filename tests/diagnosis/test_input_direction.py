@@ -1,0 +1,129 @@
+"""The ``input_direction`` adequacy test (pipeline.diagnostics.adequacy), issue 9.
+
+Records are made here with the exact zero-order-hold discretisation of a first-order system
+(closed form, scipy.signal.lfilter), a play operator (backlash) written out in this file, and AR(1)
+output noise from lfilter; they share nothing with the simulator or the detector.
+
+* The direction signal d_t (sign of the input's last change) on hand-worked inputs.
+* Size: a correct structure with AR(1) noise φ = 0.5 and 0.9 on held-step inputs: the test rejects at
+  most 1.5 α at α = 5 % and 1 %, and the adequacy rule (p < α and a share ≥ MATERIAL_R2) fires at most
+  α of the time.
+* Power: the same system behind a play of width 0.3 (input range ±1) with white noise, whose residual
+  the linear input cross-correlation and model-error model miss on most records: the direction test
+  fails adequacy on at least 90 %.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from scipy.signal import lfilter
+
+from pipeline.config import load_config
+from pipeline.data import load_record, make_split
+from pipeline.diagnostics.adequacy import (MATERIAL_R2, adequacy_tests, direction_signal,
+                                           input_direction_sensitivity, input_direction_test, material)
+from pipeline.fit import Problem, fit_output_error
+from pipeline.model import Model
+
+DT, N = 0.1, 800
+
+
+def test_direction_signal_on_hand_worked_inputs():
+    assert direction_signal(np.array([0, 0, 1, 1, 1, 0.5, 0.5, 2, 2.0])).tolist() == [0, 0, 1, 1, 1, -1, -1, 1, 1]
+    assert direction_signal(np.array([3, 3, 3, 1.0])).tolist() == [0, 0, 0, -1]
+    # a change of 1e-12 of the range is no change
+    assert direction_signal(np.array([0, 1, 1 - 1e-12, 1, 0.0])).tolist() == [0, 1, 1, 1, -1]
+
+
+def _play(u: np.ndarray, w: float) -> np.ndarray:
+    """Backlash (play operator) of total width w on a sampled input, started engaged at u[0]:
+    v_k = min(max(v_{k−1}, u_k − w/2), u_k + w/2)."""
+    v = np.empty_like(u)
+    v[0] = u[0]
+    for k in range(1, len(u)):
+        v[k] = min(max(v[k - 1], u[k] - w / 2), u[k] + w / 2)
+    return v
+
+
+def _problem(tmp, k: int, rng: np.random.Generator, phi: float, width: float) -> tuple[Problem, Model]:
+    """y' = −a y + b·play(u), u held for 8–40 samples at uniform levels in ±1, exact zoh, output noise
+    AR(1) φ at 5 % of std(y)."""
+    steps = np.repeat(rng.uniform(-1, 1, N // 8 + 1), rng.integers(8, 40, N // 8 + 1))[:N]
+    u = np.concatenate([steps, np.zeros(max(0, N - len(steps)))])
+    ua = _play(u, width) if width > 0 else u
+    a, b = 0.8, 1.0
+    e1 = np.exp(-a * DT)
+    x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], ua)
+    noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
+    y = x + 0.05 * np.std(x) / np.std(noise) * noise
+    d = tmp / f"r{k}"
+    d.mkdir()
+    pd.DataFrame({"t": DT * np.arange(N), "u": u, "y": y}).to_csv(d / "data.csv", index=False)
+    cfg = {"name": "d", "seed": 0,
+           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
+                    "remove_mean": False},
+           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
+                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
+           "split": {"validation_fraction": 0.3}}
+    (d / "c.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(d / "c.yaml")
+    rec = load_record(lc)
+    model = Model.from_config(lc)
+    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+
+
+def _direction_row(tmp, k, rng, phi, width):
+    prob, model = _problem(tmp, k, rng, phi, width)
+    with contextlib.redirect_stderr(io.StringIO()):
+        fit = fit_output_error(model, prob)
+    S = input_direction_sensitivity(fit, prob, 0)
+    assert S is not None
+    return input_direction_test(fit, prob, 0, 0, S, 0.01), fit, prob
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("phi", [0.5, 0.9])
+def test_input_direction_size_on_correct_structure_with_ar_noise(tmp_path, phi):
+    rng = np.random.default_rng([47, int(10 * phi)])
+    p, share = [], []
+    for k in range(150):
+        row, _, _ = _direction_row(tmp_path, k, rng, phi, 0.0)
+        p.append(row.p_value)
+        share.append(row.r2)
+    p, share = np.array(p), np.array(share)
+    assert np.mean(p < 0.05) <= 1.5 * 0.05
+    assert np.mean(p < 0.01) <= 1.5 * 0.01
+    assert np.mean((p < 0.01) & (share >= MATERIAL_R2)) <= 0.01
+    assert np.mean(p < 0.05) >= 0.005 or phi == 0.9   # not a test that never rejects (φ = 0.5)
+
+
+@pytest.mark.slow
+def test_input_direction_finds_a_backlash_the_linear_tests_miss(tmp_path):
+    rng = np.random.default_rng(53)
+    found, linear = 0, 0
+    reps = 30
+    for k in range(reps):
+        row, fit, prob = _direction_row(tmp_path, k, rng, 0.0, 0.3)
+        found += row.p_value < 0.01 and row.r2 >= MATERIAL_R2
+        rows = adequacy_tests(fit, prob, 0.01)
+        linear += any(material(t) for t in rows if t.name in ("input_crosscorrelation", "model_error_model"))
+        assert any(t.name == "input_direction" for t in rows)
+    assert found >= 0.9 * reps
+    assert linear < found          # the reason the test exists
+
+
+def test_input_direction_is_skipped_for_a_two_level_input(tmp_path):
+    """On a two-level input the direction of the last change is the input's own sign: nothing to test."""
+    rng = np.random.default_rng(3)
+    prob, model = _problem(tmp_path, 0, rng, 0.0, 0.0)
+    prob.U[:, 0] = np.sign(prob.U[:, 0] + 1e-9)
+    with contextlib.redirect_stderr(io.StringIO()):
+        fit = fit_output_error(model, prob)
+    assert input_direction_sensitivity(fit, prob, 0) is None
+    assert not any(t.name.startswith("input_direction") for t in adequacy_tests(fit, prob, 0.01))
