@@ -796,8 +796,13 @@ class Diagnoser:
         structural_ok = structurally_adequate(adequacy)
         noise_tests = []
         noise_fams = [f for f in self.families if f in NOISE_FAMILY_IDS]
+        # the noise families need more than an adequate structure: no structural test may be
+        # significant at all (issue 9: "input cross-correlation passes, no structural Wald test
+        # significant"). A misfit too small to fail adequacy (MATERIAL_R2) still colours the residual,
+        # and an AR noise model would take that colour for the noise's.
+        significant = [t.name for t in adequacy if not t.passed]
         if noise_fams and len(findings) < self.max_findings:
-            if structural_ok:
+            if structural_ok and not significant:
                 _log("noise families on the final model: " + ", ".join(noise_fams))
                 nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed,
                                                  n_boot=self.n_boot)
@@ -807,10 +812,12 @@ class Diagnoser:
                     adequacy += spec
                     structural_ok = False
             else:
-                _log("noise families not tested: the final model fails its adequacy tests")
+                why = ("the final model fails its adequacy tests" if not structural_ok else
+                       "significant structural tests on the final model (" + ", ".join(significant) +
+                       "), each explaining less than the adequacy threshold")
+                _log(f"noise families not tested: {why}")
                 noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,
-                                                "not tested: structure inadequate (the final model fails its "
-                                                "input cross-correlation or model-error-model test)")
+                                                f"not tested: structure inadequate ({why})")
                                for f in noise_fams]
         final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
         if not structural_ok:

@@ -1,0 +1,54 @@
+"""The noise families run only when no structural test on the final model is significant (issue 9:
+"input cross-correlation passes, no structural Wald test significant"), not merely when none is
+material: a misfit too small to fail adequacy still colours the residual, and an AR noise model would
+take that colour for the noise's.
+
+The record is made here (exact zoh of a first-order system by scipy.signal.lfilter, AR(1) φ = 0.9 output
+noise): with the true structure the coloured noise is named; the same record with one significant but
+immaterial adequacy row (p = 1e-4, 0.5 % of the residual) injected gets its noise families "not tested"
+with the reason, and the verdict says the discrepancy is unexplained, never "colored_noise".
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import numpy as np
+import pytest
+
+from pipeline.diagnostics import engine, stats
+from pipeline.diagnostics.adequacy import MATERIAL_R2
+from pipeline.diagnostics.engine import Diagnoser
+from tests.diagnosis.test_hausman import _record
+
+
+def _diagnose(tmp_path, monkeypatch, inject: bool):
+    rng = np.random.default_rng(11)
+    prob, model = _record(tmp_path, 0, rng, 0.9, False)
+    if inject:
+        real = engine.adequacy_tests
+
+        def with_row(fit, prob_, alpha):
+            row = stats.TestResult("model_error_model", 30.0, 1e-4, None, False, "injected")
+            row.r2 = 0.005
+            return real(fit, prob_, alpha) + [row]
+        monkeypatch.setattr(engine, "adequacy_tests", with_row)
+    dg = Diagnoser(prob, alpha=0.01, families=["colored_noise"], max_findings=2, seed=0, dt=0.1)
+    with contextlib.redirect_stderr(io.StringIO()):
+        return dg.run(model)
+
+
+def test_coloured_noise_is_named_on_a_correct_structure(tmp_path, monkeypatch):
+    d = _diagnose(tmp_path, monkeypatch, inject=False)
+    assert [f["family"] for f in d.findings] == ["colored_noise"]
+    assert d.verdict == "discrepancy"
+
+
+def test_a_significant_immaterial_structural_test_keeps_the_noise_families_out(tmp_path, monkeypatch):
+    d = _diagnose(tmp_path, monkeypatch, inject=True)
+    assert 0.005 < MATERIAL_R2                       # the row alone does not fail adequacy
+    assert not d.findings
+    row = next(t for t in d.noise_tests if t.name == "colored_noise")
+    assert row.detail.startswith("not tested: structure inadequate") and "model_error_model" in row.detail
+    assert d.verdict == "unexplained_discrepancy"    # the residual is coloured and nothing explains it
