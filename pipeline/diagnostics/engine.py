@@ -145,7 +145,7 @@ def bic_of(fit: FitResult, searched: int = 0) -> float:
 
 def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
     """The residual battery on every output (and every output × excited input for the
-    cross-correlation). The first output (and its first excited input) keeps the plain names the
+    cross-correlation and the Billings–Voon higher-order correlations). The first output (and its first excited input) keeps the plain names the
     contract's ``tests`` rows have always had (``ljung_box``, ``input_crosscorrelation``…); the other
     outputs and pairs add rows named ``…[y]`` / ``…[u->y]``. Returns the tests and the frequency
     (cycles/sample) of the most significant Fisher-g peak over the outputs."""
@@ -160,10 +160,11 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
                 cusum_test(e, Ji := fit.jac[i::ny] if fit.jac is not None else np.zeros((len(e), 0)), prob.t[sl], alpha),
                 cusum_squares_test(e, Ji, prob.t[sl], alpha)]
         for j in excited:
-            xc = stats.input_crosscorr(e, prob.U[sl, j], 25, alpha)
-            if i > 0 or j != excited[0]:
-                xc.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
-            rows.append(xc)
+            pair = [stats.input_crosscorr(e, prob.U[sl, j], 25, alpha), stats.billings_voon(e, prob.U[sl, j], 25, alpha)]
+            for xc in (r for r in pair if r is not None):
+                if i > 0 or j != excited[0]:
+                    xc.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
+                rows.append(xc)
         g, f_cyc = stats.fisher_g(e, alpha)
         rows.append(g)
         for r in rows:

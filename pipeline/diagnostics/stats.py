@@ -123,6 +123,44 @@ def input_crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float 
                       f"±{band:.3g} (MATLAB resid, coloured input); test against the Bonferroni bound")
 
 
+def billings_voon(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float = 0.01) -> TestResult | None:
+    """Billings & Voon (1986, Int. J. Control 44(1), 235–244) higher-order correlation tests of a
+    residual against an input, for nonlinearity the linear tests miss:
+
+        φ_{u²′e}(τ) = corr(u²′_t, e_{t+τ}),   φ_{u²′e²}(τ) = corr(u²′_t, e²′_{t+τ}),   τ = −m..m,
+
+    u²′ = (u − ū)² − mean, e²′ = e² − mean; both vanish at every lag when the residual is independent
+    of the input. Billings & Voon bound them by ±1.96/√N, which assumes a white residual; an
+    output-error residual is coloured, so each is referred to Bartlett's (1946) variance of the
+    cross-correlation of two independent stationary series, Σ_k r_x(k) r_y(k)/N, as MATLAB ``resid``
+    does for the input cross-correlation (:func:`crosscorr`). The test is the largest standardised
+    |z| = |φ|/sd over the 2(2m+1) correlations, Bonferroni: p = min(1, 2(2m+1)·2Φ(−max|z|)). None when u² is
+    affine in u (a two-level input: u² carries nothing). The statistic is max|z|, the bound the
+    Bonferroni quantile z_{1−α/(2·2(2m+1))}."""
+    u = np.asarray(u, float)
+    u2 = (u - u.mean()) ** 2
+    X = np.column_stack([np.ones(len(u)), u])
+    if np.std(u2 - X @ np.linalg.lstsq(X, u2, rcond=None)[0]) <= 1e-6 * (float(np.std(u2)) or 1.0):
+        return None   # two levels: u² is affine in u
+    u2 = u2 - u2.mean()
+    e = np.asarray(e, float)
+    rows = []
+    for label, x in (("u2'e", e), ("u2'e2", (e - e.mean()) ** 2)):
+        lags, c, band = crosscorr(x, u2, nlags, 1 - alpha)
+        sd = band / stats.norm.ppf(1 - alpha / 2)
+        k = int(np.argmax(np.abs(c)))
+        rows.append((label, float(abs(c[k])), float(abs(c[k]) / sd), int(lags[k]), sd, len(lags)))
+    m = sum(r[5] for r in rows)
+    label, worst, z, lag, sd, _ = max(rows, key=lambda r: r[2])
+    p = float(min(1.0, m * 2 * stats.norm.sf(z)))
+    bound = float(stats.norm.isf(alpha / (2 * m)))
+    return TestResult("billings_voon", z, p, bound, p >= alpha,
+                      f"largest standardised |phi| {z:.3g} (|phi| = {worst:.3g}) in phi_{label} at lag {lag} "
+                      f"(lag > 0: the input leads); "
+                      + "; ".join(f"phi_{r[0]}: largest {r[1]:.3g} ({r[2]:.2f} sd) at lag {r[3]}" for r in rows)
+                      + "; Bartlett variance for a coloured residual, Bonferroni over lags")
+
+
 def andrews_bandwidth(g: np.ndarray) -> int:
     """Andrews (1991, eq. 6.4) automatic bandwidth for the Bartlett kernel with AR(1) plug-in:
     α̂(1) = Σ 4ρ²σ⁴/((1−ρ)⁶(1+ρ)²) / Σ σ⁴/(1−ρ)⁴ over the columns, S = 1.1447 (α̂(1) N)^{1/3}."""
