@@ -802,6 +802,7 @@ class Diagnoser:
         # significant"). A misfit too small to fail adequacy (MATERIAL_R2) still colours the residual,
         # and an AR noise model would take that colour for the noise's.
         significant = [t.name for t in adequacy if not t.passed]
+        gated = False      # the noise families were kept out by a significant (immaterial) structural test
         if noise_fams and len(findings) < self.max_findings:
             if structural_ok and not significant:
                 _log("noise families on the final model: " + ", ".join(noise_fams))
@@ -817,23 +818,26 @@ class Diagnoser:
                        "significant structural tests on the final model (" + ", ".join(significant) +
                        "), each explaining less than the adequacy threshold")
                 _log(f"noise families not tested: {why}")
+                gated = structural_ok
                 noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,
                                                 f"not tested: structure inadequate ({why})")
                                for f in noise_fams]
         final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
+        # the residual battery as one family of tests (Holm at α): five tests at α each would call
+        # about 5 % of correct models "unexplained"
+        ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
+        rejected = [k.split(":", 1)[1] for k, v in stats.holm(ps, self.alpha).items() if v]
+        colour_only = bool(rejected) and all(n.startswith(COLOUR_TESTS) for n in rejected)
         if not structural_ok:
             verdict = "unexplained_discrepancy"
         elif findings:
-            verdict = "discrepancy"
+            # a coloured residual that the noise families were not allowed to explain (a structural test
+            # is still significant) is unexplained, whatever the findings explained before it
+            verdict = "unexplained_discrepancy" if gated and rejected else "discrepancy"
         else:
-            # the residual battery as one family of tests (Holm at α): five tests at α each would call
-            # about 5 % of correct models "unexplained"
-            ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
-            rejected = [k.split(":", 1)[1] for k, v in stats.holm(ps, self.alpha).items() if v]
             # a coloured residual of an adequate structure is a noise property: the noise families name
             # it (a finding); where they could not run (too few samples) colour alone is not an
             # unexplained *model* discrepancy
-            colour_only = bool(rejected) and all(n.startswith(COLOUR_TESTS) for n in rejected)
             noise_skipped = any(t.name == "noise_families" for t in noise_tests)
             verdict = ("unexplained_discrepancy" if rejected and not (colour_only and noise_skipped)
                        else "no_significant_discrepancy")

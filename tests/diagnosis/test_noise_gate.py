@@ -52,3 +52,63 @@ def test_a_significant_immaterial_structural_test_keeps_the_noise_families_out(t
     row = next(t for t in d.noise_tests if t.name == "colored_noise")
     assert row.detail.startswith("not tested: structure inadequate") and "model_error_model" in row.detail
     assert d.verdict == "unexplained_discrepancy"    # the residual is coloured and nothing explains it
+
+
+def _record_with_offset(tmp, rng):
+    """y' = −a y + b u + 0.3 (an input-side offset the nominal model lacks), exact zoh by lfilter,
+    AR(1) φ = 0.9 output noise at 5 % of std(y)."""
+    import pandas as pd
+    import yaml
+    from scipy.signal import lfilter
+
+    from pipeline.config import load_config
+    from pipeline.data import load_record, make_split
+    from pipeline.fit import Problem
+    from pipeline.model import Model
+    n, dt = 800, 0.1
+    u = np.repeat(rng.uniform(-1, 1, n // 8 + 1), rng.integers(8, 40, n // 8 + 1))[:n]
+    u = np.concatenate([u, np.zeros(max(0, n - len(u)))])
+    a, b = 0.8, 1.0
+    e1 = np.exp(-a * dt)
+    x = lfilter([0.0, (1 - e1) / a], [1.0, -e1], b * u + 0.3)
+    noise = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n + 300))[300:]
+    y = x + 0.05 * np.std(x) / np.std(noise) * noise
+    pd.DataFrame({"t": dt * np.arange(n), "u": u, "y": y}).to_csv(tmp / "data.csv", index=False)
+    cfg = {"name": "g", "seed": 0,
+           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
+                    "remove_mean": False},
+           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
+                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
+           "split": {"validation_fraction": 0.3}}
+    (tmp / "c.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(tmp / "c.yaml")
+    rec = load_record(lc)
+    model = Model.from_config(lc)
+    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+
+
+@pytest.mark.parametrize("inject", [False, True])
+def test_a_finding_does_not_make_an_ungated_colour_explained(tmp_path, monkeypatch, inject):
+    """With a physical finding (the offset) and AR(1) noise: without a significant structural test the
+    noise families name the colour and the verdict is "discrepancy"; with one (injected, immaterial)
+    the noise families are kept out, the coloured residual is unexplained, and the verdict says so,
+    with the offset listed as a partial finding."""
+    prob, model = _record_with_offset(tmp_path, np.random.default_rng(13))
+    if inject:
+        real = engine.adequacy_tests
+
+        def with_row(fit, prob_, alpha):
+            row = stats.TestResult("model_error_model", 30.0, 1e-4, None, False, "injected")
+            row.r2 = 0.005
+            return real(fit, prob_, alpha) + [row]
+        monkeypatch.setattr(engine, "adequacy_tests", with_row)
+    dg = Diagnoser(prob, alpha=0.01, families=["offset", "colored_noise"], max_findings=3, seed=0, dt=0.1)
+    with contextlib.redirect_stderr(io.StringIO()):
+        d = dg.run(model)
+    fams = [f["family"] for f in d.findings]
+    if inject:
+        assert fams == ["offset"]
+        assert d.verdict == "unexplained_discrepancy"
+    else:
+        assert fams == ["offset", "colored_noise"]
+        assert d.verdict == "discrepancy"
