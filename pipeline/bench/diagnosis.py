@@ -318,6 +318,7 @@ def summarise(results: list[dict]) -> dict:
                                sum(1 for r in eff if r["spec"]["noise"] == nz)] for nz in NOISE_LEVELS},
         "null_physical_false_alarms": [sum(r["null"]["physical_false_alarm"] for r in nul_ok), len(nul)],
         "null_any_false_alarms": [sum(r["null"]["any_false_alarm"] for r in nul_ok), len(nul)],
+        "null_unexplained": [sum(r.get("verdict") == "unexplained_discrepancy" for r in nul), len(nul)],
         "oov_right": [len(oov_right), len(oov)],
         "oov_unexplained": [sum(r.get("verdict") == "unexplained_discrepancy" for r in oov), len(oov)],
         "coverage": [sum(c["covered"] for c in cov), len(cov)],
@@ -353,6 +354,8 @@ def render(results: list[dict], meta: dict) -> str:
     L.append(f"| null records with a physical finding (false alarm) | {_pct(k, n)} | ≤ 2 % |")
     k, n = s["null_any_false_alarms"]
     L.append(f"| null records with any unjustified finding (incl. noise families) | {_pct(k, n)} | – |")
+    k, n = s.get("null_unexplained", [0, 0])
+    L.append(f"| null records with verdict `unexplained_discrepancy` | {_pct(k, n)} | – |")
     k, n = s["oov_right"]
     L.append(f"| out-of-vocabulary: `unexplained_discrepancy` or a right answer | {_pct(k, n)} | ≥ 90 % |")
     k, n = s["oov_unexplained"]
