@@ -427,23 +427,12 @@ class Diagnoser:
         flat = [h for _, hyps in fams for h in hyps]
         if any(h.acts_from is not None for h in flat):
             self._current_states(fit)     # once, before the threads share it
-        # each family's likelihood-ratio screen (see _lr_screen) is refitted from its own Wald estimate:
-        # that test first, then the refit runs beside the other families' tests
-        lr_first = {}
-        for _, hyps in fams:
-            h = next((h for h in hyps if h.info.get("lr_screen")), None)
-            if h is not None:
-                lr_first[id(h)] = h
         with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
             sens = list(pool.map(lambda h: self.sensitivity(fit, h, ctx.X), flat))
             skip = self.screened_out(fit, flat, sens)
             sens = [None if id(h) in skip else S for h, S in zip(flat, sens)]
-            pre = {id(h): (None if S is None else self.statistic(fit, S)) for h, S in zip(flat, sens) if id(h) in lr_first}
-            lr_jobs = {k: pool.submit(self._lr_refit, fit, lr_first[k], pre[k]) for k in lr_first}
-            results = dict(zip(map(id, flat), pool.map(
-                lambda hS: pre[id(hS[0])] if id(hS[0]) in pre else (None if hS[1] is None else self.statistic(fit, hS[1])),
-                zip(flat, sens))))
-            lr_done = {k: j.result() for k, j in lr_jobs.items()}
+            results = dict(zip(map(id, flat), pool.map(lambda S: None if S is None else self.statistic(fit, S),
+                                                       sens)))
         for fam, hyps in fams:
             tested = [(h, results[id(h)]) for h in hyps if results[id(h)] is not None]
             if not tested:
@@ -460,7 +449,7 @@ class Diagnoser:
             best = Candidate(h, wr, 1.0, [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic,
                                            "p_value": wr.p_value, "dof": wr.dof}])
             best.p_family = min(1.0, p_min * len(hyps))
-            best = self._lr_screen(fit, fam, hyps, results, best, lr_done)
+            best = self._lr_screen(fit, fam, hyps, results, best)
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
@@ -502,13 +491,7 @@ class Diagnoser:
             c.evidence.append(ee)
         return [c]
 
-    def _lr_refit(self, fit: FitResult, h: Hypothesis, wr) -> tuple[Candidate, FitResult | None]:
-        """The refit of a likelihood-ratio screen hypothesis (started from its Wald estimate ``wr``)."""
-        cand = Candidate(h, wr, 1.0, [])
-        return cand, self.estimate(fit, cand)
-
-    def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate,
-                   done: dict | None = None) -> Candidate:
+    def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate) -> Candidate:
         """A family may mark one hypothesis ``info['lr_screen']``: a large, strongly nonlinear effect
         (a hard end stop) whose linearised added-term test has little power. That hypothesis is
         refitted now and tested by the likelihood-ratio test with the effective sample size
@@ -519,7 +502,8 @@ class Diagnoser:
             return best
         best.p_family = min(1.0, 2.0 * best.p_family)
         wr = results.get(id(lr_h))
-        cand, f = (done or {}).get(id(lr_h)) or self._lr_refit(fit, lr_h, wr)
+        cand = Candidate(lr_h, wr, 1.0, [])
+        f = self.estimate(fit, cand)
         if f is None:
             return best
         lr = lr_against(fit, f, self.alpha, len(lr_h.searched))
