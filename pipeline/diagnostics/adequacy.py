@@ -100,9 +100,7 @@ def input_direction_sensitivity(fit, prob, j: int) -> np.ndarray | None:
     if np.count_nonzero(np.diff(de)) < DIRECTION_MIN_SWITCHES:
         return None
     known = de != 0
-    X = np.column_stack([np.ones(int(known.sum())), u[sl][known]])
-    r = de[known] - X @ np.linalg.lstsq(X, de[known], rcond=None)[0]
-    if np.std(r) < 1e-3 * (np.std(de[known]) or 1.0):
+    if stats.affine_in(de[known], u[sl][known], 1e-3):
         return None
     v = (d - de.mean()) / np.std(de)
     eps = 1e-4 * (float(np.std(u[sl])) or 1.0)

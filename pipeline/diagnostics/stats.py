@@ -123,6 +123,14 @@ def input_crosscorr(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float 
                       f"±{band:.3g} (MATLAB resid, coloured input); test against the Bonferroni bound")
 
 
+def affine_in(x: np.ndarray, u: np.ndarray, rtol: float) -> bool:
+    """Is x, to within ``rtol`` of its standard deviation, a + b·u? (Any function of a two-level input
+    is: a test built on such an x has nothing beyond the input's own linear term to find.)"""
+    X = np.column_stack([np.ones(len(u)), u])
+    r = x - X @ np.linalg.lstsq(X, x, rcond=None)[0]
+    return float(np.std(r)) <= rtol * (float(np.std(x)) or 1.0)
+
+
 def billings_voon(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float = 0.01) -> TestResult | None:
     """Billings & Voon (1986, Int. J. Control 44(1), 235–244) higher-order correlation tests of a
     residual against an input, for nonlinearity the linear tests miss:
@@ -139,9 +147,8 @@ def billings_voon(e: np.ndarray, u: np.ndarray, nlags: int = 25, alpha: float = 
     Bonferroni quantile z_{1−α/(2·2(2m+1))}."""
     u = np.asarray(u, float)
     u2 = (u - u.mean()) ** 2
-    X = np.column_stack([np.ones(len(u)), u])
-    if np.std(u2 - X @ np.linalg.lstsq(X, u2, rcond=None)[0]) <= 1e-6 * (float(np.std(u2)) or 1.0):
-        return None   # two levels: u² is affine in u
+    if affine_in(u2, u, 1e-6):
+        return None   # two levels
     u2 = u2 - u2.mean()
     e = np.asarray(e, float)
     rows = []
