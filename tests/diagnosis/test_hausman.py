@@ -17,27 +17,23 @@ import contextlib
 import io
 
 import numpy as np
-import pandas as pd
 import pytest
-import yaml
 from scipy.linalg import toeplitz
 from scipy.signal import lfilter
 
-from pipeline.config import load_config
-from pipeline.data import load_record, make_split
 from pipeline.diagnostics.adequacy import MATERIAL_R2
 from pipeline.diagnostics.hausman import NAME, covariance_of_difference
 from pipeline.diagnostics.noise import diagnose_noise
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
+from tests.diagnosis.first_order import held_steps, problem
 
 DT, N = 0.1, 800
 
 
-def _record(tmp, k: int, rng: np.random.Generator, phi: float, second_order: bool) -> Problem:
+def _record(tmp, k: int, rng: np.random.Generator, phi: float, second_order: bool) -> tuple[Problem, Model]:
     """y' = −a y + b u (or that in series with a lag of 0.6 s), u held for 8–40 samples, exact zoh."""
-    steps = np.repeat(rng.uniform(-1, 1, N // 8 + 1), rng.integers(8, 40, N // 8 + 1))[:N]
-    u = np.concatenate([steps, np.zeros(max(0, N - len(steps)))])
+    u = held_steps(rng, N)
     a, b = 0.8, 1.0
     e1 = np.exp(-a * DT)
     x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], u)
@@ -46,20 +42,7 @@ def _record(tmp, k: int, rng: np.random.Generator, phi: float, second_order: boo
         x = lfilter([0.0, 1 - e2], [1.0, -e2], x)
     noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
     y = x + 0.05 * np.std(x) / np.std(noise) * noise
-    d = tmp / f"r{k}"
-    d.mkdir()
-    pd.DataFrame({"t": DT * np.arange(N), "u": u, "y": y}).to_csv(d / "data.csv", index=False)
-    cfg = {"name": "h", "seed": 0,
-           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
-                    "remove_mean": False},
-           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
-                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
-           "split": {"validation_fraction": 0.3}, "diagnose": {"families": ["colored_noise"]}}
-    (d / "c.yaml").write_text(yaml.safe_dump(cfg))
-    lc = load_config(d / "c.yaml")
-    rec = load_record(lc)
-    model = Model.from_config(lc)
-    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+    return problem(tmp / f"r{k}", DT, u, y, "h", {"families": ["colored_noise"]})
 
 
 def _hausman(tmp, k, rng, phi, second_order):

@@ -19,17 +19,14 @@ import contextlib
 import io
 
 import numpy as np
-import pandas as pd
 import pytest
-import yaml
 from scipy.signal import lfilter
 
-from pipeline.config import load_config
-from pipeline.data import load_record, make_split
 from pipeline.diagnostics.adequacy import (MATERIAL_R2, adequacy_tests, direction_signal,
                                            input_direction_sensitivity, input_direction_test, material)
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
+from tests.diagnosis.first_order import held_steps, problem
 
 DT, N = 0.1, 800
 
@@ -54,28 +51,14 @@ def _play(u: np.ndarray, w: float) -> np.ndarray:
 def _problem(tmp, k: int, rng: np.random.Generator, phi: float, width: float) -> tuple[Problem, Model]:
     """y' = −a y + b·play(u), u held for 8–40 samples at uniform levels in ±1, exact zoh, output noise
     AR(1) φ at 5 % of std(y)."""
-    steps = np.repeat(rng.uniform(-1, 1, N // 8 + 1), rng.integers(8, 40, N // 8 + 1))[:N]
-    u = np.concatenate([steps, np.zeros(max(0, N - len(steps)))])
+    u = held_steps(rng, N)
     ua = _play(u, width) if width > 0 else u
     a, b = 0.8, 1.0
     e1 = np.exp(-a * DT)
     x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], ua)
     noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
     y = x + 0.05 * np.std(x) / np.std(noise) * noise
-    d = tmp / f"r{k}"
-    d.mkdir()
-    pd.DataFrame({"t": DT * np.arange(N), "u": u, "y": y}).to_csv(d / "data.csv", index=False)
-    cfg = {"name": "d", "seed": 0,
-           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
-                    "remove_mean": False},
-           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
-                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
-           "split": {"validation_fraction": 0.3}}
-    (d / "c.yaml").write_text(yaml.safe_dump(cfg))
-    lc = load_config(d / "c.yaml")
-    rec = load_record(lc)
-    model = Model.from_config(lc)
-    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+    return problem(tmp / f"r{k}", DT, u, y, "d")
 
 
 def _direction_row(tmp, k, rng, phi, width):

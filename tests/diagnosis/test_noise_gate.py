@@ -16,24 +16,31 @@ import io
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
 from pipeline.diagnostics import engine, stats
 from pipeline.diagnostics.adequacy import MATERIAL_R2
 from pipeline.diagnostics.engine import Diagnoser
+from tests.diagnosis.first_order import held_steps, problem
 from tests.diagnosis.test_hausman import _record
+
+
+def _inject_immaterial_row(monkeypatch) -> None:
+    """Every adequacy battery gains a significant (p = 1e-4) but immaterial (0.5 % of the residual) row."""
+    real = engine.adequacy_tests
+
+    def with_row(fit, prob_, alpha):
+        row = stats.TestResult("model_error_model", 30.0, 1e-4, None, False, "injected")
+        row.r2 = 0.005
+        return real(fit, prob_, alpha) + [row]
+    monkeypatch.setattr(engine, "adequacy_tests", with_row)
 
 
 def _diagnose(tmp_path, monkeypatch, inject: bool):
     rng = np.random.default_rng(11)
     prob, model = _record(tmp_path, 0, rng, 0.9, False)
     if inject:
-        real = engine.adequacy_tests
-
-        def with_row(fit, prob_, alpha):
-            row = stats.TestResult("model_error_model", 30.0, 1e-4, None, False, "injected")
-            row.r2 = 0.005
-            return real(fit, prob_, alpha) + [row]
-        monkeypatch.setattr(engine, "adequacy_tests", with_row)
+        _inject_immaterial_row(monkeypatch)
     dg = Diagnoser(prob, alpha=0.01, families=["colored_noise"], max_findings=2, seed=0, dt=0.1)
     with contextlib.redirect_stderr(io.StringIO()):
         return dg.run(model)
@@ -57,34 +64,14 @@ def test_a_significant_immaterial_structural_test_keeps_the_noise_families_out(t
 def _record_with_offset(tmp, rng):
     """y' = −a y + b u + 0.3 (an input-side offset the nominal model lacks), exact zoh by lfilter,
     AR(1) φ = 0.9 output noise at 5 % of std(y)."""
-    import pandas as pd
-    import yaml
-    from scipy.signal import lfilter
-
-    from pipeline.config import load_config
-    from pipeline.data import load_record, make_split
-    from pipeline.fit import Problem
-    from pipeline.model import Model
     n, dt = 800, 0.1
-    u = np.repeat(rng.uniform(-1, 1, n // 8 + 1), rng.integers(8, 40, n // 8 + 1))[:n]
-    u = np.concatenate([u, np.zeros(max(0, n - len(u)))])
+    u = held_steps(rng, n)
     a, b = 0.8, 1.0
     e1 = np.exp(-a * dt)
     x = lfilter([0.0, (1 - e1) / a], [1.0, -e1], b * u + 0.3)
     noise = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n + 300))[300:]
     y = x + 0.05 * np.std(x) / np.std(noise) * noise
-    pd.DataFrame({"t": dt * np.arange(n), "u": u, "y": y}).to_csv(tmp / "data.csv", index=False)
-    cfg = {"name": "g", "seed": 0,
-           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
-                    "remove_mean": False},
-           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
-                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
-           "split": {"validation_fraction": 0.3}}
-    (tmp / "c.yaml").write_text(yaml.safe_dump(cfg))
-    lc = load_config(tmp / "c.yaml")
-    rec = load_record(lc)
-    model = Model.from_config(lc)
-    return Problem.from_record(rec, model, make_split(lc, rec), None), model
+    return problem(tmp / "r", dt, u, y, "g")
 
 
 @pytest.mark.parametrize("inject", [False, True])
@@ -95,13 +82,7 @@ def test_a_finding_does_not_make_an_ungated_colour_explained(tmp_path, monkeypat
     with the offset listed as a partial finding."""
     prob, model = _record_with_offset(tmp_path, np.random.default_rng(13))
     if inject:
-        real = engine.adequacy_tests
-
-        def with_row(fit, prob_, alpha):
-            row = stats.TestResult("model_error_model", 30.0, 1e-4, None, False, "injected")
-            row.r2 = 0.005
-            return real(fit, prob_, alpha) + [row]
-        monkeypatch.setattr(engine, "adequacy_tests", with_row)
+        _inject_immaterial_row(monkeypatch)
     dg = Diagnoser(prob, alpha=0.01, families=["offset", "colored_noise"], max_findings=3, seed=0, dt=0.1)
     with contextlib.redirect_stderr(io.StringIO()):
         d = dg.run(model)

@@ -1,0 +1,44 @@
+"""The first-order records of the Monte Carlo tests (test_hausman.py, test_input_direction.py,
+test_noise_gate.py): a held-step input, and the nominal model y' = −a y + b u written as a config and
+loaded as the pipeline loads a user's record. Written here, sharing no code with the detector; each
+test makes its output with the exact zero-order-hold discretisation (scipy.signal.lfilter)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from pipeline.config import load_config
+from pipeline.data import load_record, make_split
+from pipeline.fit import Problem
+from pipeline.model import Model
+
+
+def held_steps(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n samples of uniform levels in ±1, each held for 8–40 samples."""
+    steps = np.repeat(rng.uniform(-1, 1, n // 8 + 1), rng.integers(8, 40, n // 8 + 1))[:n]
+    return np.concatenate([steps, np.zeros(max(0, n - len(steps)))])
+
+
+def problem(folder: Path, dt: float, u: np.ndarray, y: np.ndarray, name: str = "r",
+            diagnose: dict | None = None) -> tuple[Problem, Model]:
+    """Write (t, u, y) and the nominal first-order config (a = b = 1 to start, 30 % validation) to
+    ``folder`` and load them: the Problem and Model the pipeline would make of them."""
+    folder.mkdir()
+    pd.DataFrame({"t": dt * np.arange(len(u)), "u": u, "y": y}).to_csv(folder / "data.csv", index=False)
+    cfg = {"name": name, "seed": 0,
+           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "intersample": "zoh",
+                    "remove_mean": False},
+           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 1.0, "b": 1.0}, "free": ["a", "b"],
+                     "equations": {"y": "-a*y + b*u"}, "initial": {"y": 0.0}},
+           "split": {"validation_fraction": 0.3}}
+    if diagnose is not None:
+        cfg["diagnose"] = diagnose
+    (folder / "c.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(folder / "c.yaml")
+    rec = load_record(lc)
+    model = Model.from_config(lc)
+    return Problem.from_record(rec, model, make_split(lc, rec), None), model
