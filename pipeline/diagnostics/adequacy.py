@@ -15,7 +15,10 @@ Adequacy tests on the estimation residual of every output against every input (e
   Systems with Actuator and Sensor Nonlinearities*, Wiley, §2.2, eq. 2.7), and rate-independent
   hysteresis on the input adds a term of the same sign pattern; neither is a linear function of the
   input, so the model-error model above cannot see it, and the residual it leaves is smooth and
-  easily taken for coloured noise.
+  easily taken for coloured noise;
+* ``input_coherence``: the magnitude-squared coherence of residual and input at every frequency the
+  input excites, against its exact null Beta(1, K − 1) (:mod:`.coherence`): a missing lightly damped
+  mode leaves input dynamics at lags far beyond the first two tests' 25 and 15.
 
 A model that fails them has a structural error; when no family's extension removes it the verdict is
 ``unexplained_discrepancy`` (contract §3), never "no discrepancy", and the noise families are not tested
@@ -33,8 +36,10 @@ from scipy.stats import chi2, norm
 
 from ..fit import simulate_until
 from . import stats
+from .coherence import input_coherence
 
 FIR_ORDER = 15
+N_TESTS = 4          # per input-output pair: cross-correlation, model-error model, input direction, coherence
 # a significant test fails adequacy only when the dependence it finds is material: it explains at least
 # this share of the residual's sum of squares (with N in the thousands, a 0.1 % misfit is significant)
 MATERIAL_R2 = 0.02
@@ -131,13 +136,13 @@ def input_direction_test(fit, prob, i: int, j: int, S: np.ndarray, alpha: float)
 
 
 def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
-    """Every output × every input; the level of each is α / (number of pairs × 3 tests)."""
+    """Every output × every input; the level of each is α / (number of pairs × ``N_TESTS``)."""
     sl = prob.split.est_slice()
     pairs = [(i, j) for i in range(fit.resid_est.shape[1]) for j in range(prob.U.shape[1])
              if np.ptp(prob.U[sl, j]) > 0]
     if not pairs:
         return []
-    a = alpha / (3 * len(pairs))
+    a = alpha / (N_TESTS * len(pairs))
     sens = {j: input_direction_sensitivity(fit, prob, j) for j in sorted({j for _, j in pairs})}
     out = []
     for i, j in pairs:
@@ -148,6 +153,9 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
         tests = [xc, model_error_model(e, u, a)]
         if sens[j] is not None:
             tests.append(input_direction_test(fit, prob, i, j, sens[j], a))
+        coh = input_coherence(e, u, a, float(np.median(np.diff(prob.t[sl]))) if len(e) > 1 else 1.0)
+        if coh is not None:
+            tests.append(coh)
         for t in tests:
             t.name += tag
             out.append(t)
