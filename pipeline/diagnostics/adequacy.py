@@ -144,6 +144,8 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
         return []
     a = alpha / (N_TESTS * len(pairs))
     sens = {j: input_direction_sensitivity(fit, prob, j) for j in sorted({j for _, j in pairs})}
+    ts = prob.t[sl]
+    dt = float(np.median(np.diff(ts))) if len(ts) > 1 else 1.0    # the coherence row's frequency unit
     out = []
     for i, j in pairs:
         e, u = fit.resid_est[:, i], prob.U[sl, j]
@@ -153,7 +155,7 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
         tests = [xc, model_error_model(e, u, a)]
         if sens[j] is not None:
             tests.append(input_direction_test(fit, prob, i, j, sens[j], a))
-        coh = input_coherence(e, u, a, float(np.median(np.diff(prob.t[sl]))) if len(e) > 1 else 1.0)
+        coh = input_coherence(e, u, a, dt)
         if coh is not None:
             tests.append(coh)
         for t in tests:

@@ -1,7 +1,7 @@
 """The first-order records of the Monte Carlo tests (test_hausman.py, test_input_direction.py,
-test_noise_gate.py): a held-step input, and the nominal model y' = −a y + b u written as a config and
-loaded as the pipeline loads a user's record. Written here, sharing no code with the detector; each
-test makes its output with the exact zero-order-hold discretisation (scipy.signal.lfilter)."""
+test_input_coherence.py, test_noise_gate.py): a held-step input, the exact zero-order-hold response of
+y' = −a y + b u (scipy.signal.lfilter), AR(1) output noise, and the nominal model written as a config
+and loaded as the pipeline loads a user's record. Written here, sharing no code with the detector."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
+from scipy.signal import lfilter
 
 from pipeline.config import load_config
 from pipeline.data import load_record, make_split
@@ -21,6 +22,23 @@ def held_steps(rng: np.random.Generator, n: int) -> np.ndarray:
     """n samples of uniform levels in ±1, each held for 8–40 samples."""
     steps = np.repeat(rng.uniform(-1, 1, n // 8 + 1), rng.integers(8, 40, n // 8 + 1))[:n]
     return np.concatenate([steps, np.zeros(max(0, n - len(steps)))])
+
+
+def zoh_first_order(u: np.ndarray, dt: float, a: float, b: float) -> np.ndarray:
+    """y' = −a y + b u from rest, sampled every dt with u held between samples: exactly
+    y_{k+1} = e^{−a dt} y_k + (b/a)(1 − e^{−a dt}) u_k."""
+    e1 = np.exp(-a * dt)
+    return lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], u)
+
+
+def ar1(rng: np.random.Generator, n: int, phi: float, burn: int = 300) -> np.ndarray:
+    """n samples of an AR(1) process with unit innovations, after ``burn`` samples of warm-up."""
+    return lfilter([1.0], [1.0, -phi], rng.standard_normal(n + burn))[burn:]
+
+
+def with_noise(x: np.ndarray, noise: np.ndarray, level: float = 0.05) -> np.ndarray:
+    """x plus ``noise`` scaled to ``level`` × std(x)."""
+    return x + level * np.std(x) / np.std(noise) * noise
 
 
 def problem(folder: Path, dt: float, u: np.ndarray, y: np.ndarray, name: str = "r",

@@ -26,7 +26,7 @@ from pipeline.diagnostics.hausman import NAME, covariance_of_difference
 from pipeline.diagnostics.noise import diagnose_noise
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
-from tests.diagnosis.first_order import held_steps, problem
+from tests.diagnosis.first_order import ar1, held_steps, problem, with_noise, zoh_first_order
 
 DT, N = 0.1, 800
 
@@ -35,13 +35,11 @@ def _record(tmp, k: int, rng: np.random.Generator, phi: float, second_order: boo
     """y' = −a y + b u (or that in series with a lag of 0.6 s), u held for 8–40 samples, exact zoh."""
     u = held_steps(rng, N)
     a, b = 0.8, 1.0
-    e1 = np.exp(-a * DT)
-    x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], u)
+    x = zoh_first_order(u, DT, a, b)
     if second_order:
         e2 = np.exp(-DT / 0.6)
         x = lfilter([0.0, 1 - e2], [1.0, -e2], x)
-    noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
-    y = x + 0.05 * np.std(x) / np.std(noise) * noise
+    y = with_noise(x, ar1(rng, N, phi))
     return problem(tmp / f"r{k}", DT, u, y, "h", {"families": ["colored_noise"]})
 
 

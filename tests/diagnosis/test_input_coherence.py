@@ -29,11 +29,11 @@ import pytest
 from scipy import signal
 from scipy.signal import windows
 
-from pipeline.diagnostics.adequacy import MATERIAL_R2, adequacy_tests, material
+from pipeline.diagnostics.adequacy import MATERIAL_R2, adequacy_tests
 from pipeline.diagnostics.coherence import input_coherence
 from pipeline.diagnostics.stats import prewhiten_ar
 from pipeline.fit import fit_output_error
-from tests.diagnosis.first_order import held_steps, problem
+from tests.diagnosis.first_order import ar1, held_steps, problem, with_noise, zoh_first_order
 
 DT, N = 0.1, 2000
 
@@ -44,7 +44,7 @@ def _band(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def _ar1(rng: np.random.Generator, n: int, phi: float) -> np.ndarray:
-    return signal.lfilter([1.0], [1.0, -phi], rng.standard_normal(n + 500))[500:]
+    return ar1(rng, n, phi, burn=500)
 
 
 def test_statistic_is_the_multitaper_coherence_of_scipy_spectra():
@@ -105,15 +105,13 @@ def _record(tmp, k: int, rng: np.random.Generator, phi: float, mode_share: float
     (ω = 2π/(150 dt), ζ = 0.05) whose std is that share of std(y); output noise AR(1) φ at 5 % of std(y)."""
     u = held_steps(rng, N)
     a, b = 0.8, 1.0
-    e1 = np.exp(-a * DT)
-    y = signal.lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], u)
+    y = zoh_first_order(u, DT, a, b)
     if mode_share > 0:
         om, zeta = 2 * np.pi / (150 * DT), 0.05
         num, den, _ = signal.cont2discrete(([1.0], [1.0, 2 * zeta * om, om * om]), DT, method="zoh")
         q = signal.lfilter(np.ravel(num), den, u)
         y = y + mode_share * np.std(y) / np.std(q) * q
-    noise = _ar1(rng, N, phi)
-    y = y + 0.05 * np.std(y) / np.std(noise) * noise
+    y = with_noise(y, _ar1(rng, N, phi))
     prob, model = problem(tmp / f"r{k}", DT, u, y, "c")
     with contextlib.redirect_stderr(io.StringIO()):
         fit = fit_output_error(model, prob)

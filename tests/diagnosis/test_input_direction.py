@@ -20,13 +20,12 @@ import io
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from pipeline.diagnostics.adequacy import (MATERIAL_R2, adequacy_tests, direction_signal,
                                            input_direction_sensitivity, input_direction_test, material)
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
-from tests.diagnosis.first_order import held_steps, problem
+from tests.diagnosis.first_order import ar1, held_steps, problem, with_noise, zoh_first_order
 
 DT, N = 0.1, 800
 
@@ -54,10 +53,7 @@ def _problem(tmp, k: int, rng: np.random.Generator, phi: float, width: float) ->
     u = held_steps(rng, N)
     ua = _play(u, width) if width > 0 else u
     a, b = 0.8, 1.0
-    e1 = np.exp(-a * DT)
-    x = lfilter([0.0, b / a * (1 - e1)], [1.0, -e1], ua)
-    noise = lfilter([1.0], [1.0, -phi], rng.standard_normal(N + 300))[300:]
-    y = x + 0.05 * np.std(x) / np.std(noise) * noise
+    y = with_noise(zoh_first_order(ua, DT, a, b), ar1(rng, N, phi))
     return problem(tmp / f"r{k}", DT, u, y, "d")
 
 
