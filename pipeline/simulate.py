@@ -9,7 +9,8 @@ folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate r
 ``error_model='numpy'`` (a division by zero gives inf/nan, caught as divergence, instead of a check per
 division): one compile per model *structure* and machine, reused
 across processes. Extension terms are a table evaluated inside the same kernel, so refitting a
-candidate extension never recompiles. Divergence (non-finite or beyond ``bound``) stops the loop and is
+candidate extension never recompiles; the terms of an accepted model (``Model.compiled``) are written into
+its own kernel's source instead, since each interpreted term costs about a nominal right-hand side. Divergence (non-finite or beyond ``bound``) stops the loop and is
 reported with its sample index; a fixed-step loop cannot hang.
 """
 
@@ -354,8 +355,12 @@ def programs(model: Model) -> Programs:
         add(0, pidx[rw.target], model.expr(rw.text).tree, resolver(False, True))
     for rw in model.input_rewrites:
         add(1, uidx[rw.target], model.expr(rw.text).tree, resolver(True, False))
+    compiled = list(_kernel_terms(model))
     for term in model.terms:
         if term.is_output:
+            continue
+        if term in compiled:        # in the kernel's own source (once per occurrence)
+            compiled.remove(term)
             continue
         tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
         add(2, sidx[term.target], tree, resolver(False, False))
@@ -365,6 +370,18 @@ def programs(model: Model) -> Programs:
             sidx[L.rate] if L.rate else -1) for L in model.limits]
     return Programs(np.array(ops, np.int64), np.array(args, np.int64), np.array(consts + [0.0], float),
                     np.array(rows, np.int64).reshape(-1, 4), np.array(lim, np.int64).reshape(-1, 4))
+
+
+def _kernel_terms(model: Model) -> list:
+    """The model's terms compiled into its kernel: those of ``model.kernel_terms`` it still has (once
+    per occurrence), acting on a nominal state, in the model's own term order."""
+    want = list(model.kernel_terms)
+    out = []
+    for term in model.terms:
+        if term in want and not term.is_output and term.target in model.nominal_states:
+            want.remove(term)
+            out.append(term)
+    return out
 
 
 def _cache_dir() -> Path:
@@ -402,6 +419,16 @@ def kernel_source(model: Model) -> str:
     stage = {**names, **{s: f"xt[{i}]" for i, s in enumerate(model.nominal_states)}}
     generic = [f"{' ' * 24}dx[{i}] = {to_source(model.equations[s], stage, scalar=True)}"
                for i, s in enumerate(model.nominal_states)]
+    # compiled extension terms (Model.kernel_terms): c * expr added after the nominal right-hand side,
+    # in the order the interpreter would add them; every state, effective input and parameter by index
+    full = {**{s: f"xs[{i}]" for i, s in enumerate(model.states)}, **names,
+            **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}}
+    full_stage = {**full, **{s: f"xt[{i}]" for i, s in enumerate(model.states)}}
+    for term in _kernel_terms(model):
+        i = model.nominal_states.index(term.target)
+        tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
+        assign.append(f"    dx[{i}] += {to_source(tree, full, scalar=True)}")
+        generic.append(f"{' ' * 24}dx[{i}] += {to_source(tree, full_stage, scalar=True)}")
     return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign),
                             assign_generic="\n".join(generic), sample_head=_SAMPLE_HEAD,
                             sample_tail=_SAMPLE_TAIL)
@@ -456,7 +483,7 @@ _PROGRAMS: dict = {}
 
 def _programs_cached(model: Model) -> Programs:
     """Programs depend on the structure only (names and expressions), not on parameter values."""
-    key = (model.states, model.inputs, tuple(model.params), model.terms, model.input_rewrites,
+    key = (model.states, model.inputs, tuple(model.params), model.terms, model.kernel_terms, model.input_rewrites,
            model.param_rewrites, model.limits, tuple(model.equations[s].text for s in model.extra_states))
     if key not in _PROGRAMS:
         if len(_PROGRAMS) > 4096:
