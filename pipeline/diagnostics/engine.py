@@ -719,13 +719,21 @@ class Diagnoser:
         _log(f"fitting the nominal model ({len(model.free)} free parameters, output error)")
         nominal = self._fit_nominal(model, start)
         current = nominal
-        tests0, f_cyc0 = residual_tests(nominal, prob, self.alpha)
+        memo: dict[int, tuple] = {}
+
+        def tests_of(fit: FitResult):
+            """The residual battery of a fit, computed once (the fit is kept, so its id stays unique)."""
+            if id(fit) not in memo:
+                memo[id(fit)] = (fit, residual_tests(fit, prob, self.alpha))
+            return memo[id(fit)][1]
+
+        tests0, f_cyc0 = tests_of(nominal)
         findings, history, fits = [], [], [nominal]
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
         last_r2: dict[str, float] = {}
         for it in range(self.max_findings):
-            tests, f_cyc = (tests0, f_cyc0) if current is nominal else residual_tests(current, prob, self.alpha)
+            tests, f_cyc = tests_of(current)
             fisher = strongest_fisher(tests)
             cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
@@ -792,7 +800,7 @@ class Diagnoser:
             fits.append(current)
             last_p = None
         if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
-            tests_f, f_cyc_f = residual_tests(current, prob, self.alpha)
+            tests_f, f_cyc_f = tests_of(current)
             cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
             last_p = {c.hyp.family: c.p_family for c in cands}
             last_r2 = _family_r2(cands)
@@ -837,7 +845,7 @@ class Diagnoser:
                 noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,
                                                 f"not tested: structure inadequate ({why})")
                                for f in noise_fams]
-        final_tests = tests0 if current is nominal else residual_tests(current, prob, self.alpha)[0]
+        final_tests = tests_of(current)[0]
         # the residual battery as one family of tests (Holm at α): five tests at α each would call
         # about 5 % of correct models "unexplained"
         ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
