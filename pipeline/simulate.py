@@ -22,6 +22,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -435,14 +436,24 @@ def kernel_source(model: Model) -> str:
 
 
 _LOADED: dict[str, object] = {}
+_LOAD_LOCK = threading.Lock()
 
 
 def get_kernel(model: Model):
-    """The compiled ``simulate`` function for this model's structure (built once, cached on disk)."""
+    """The compiled ``simulate`` function for this model's structure (built once, cached on disk;
+    loaded once per process even when several refit threads ask for a new structure at once)."""
     src = kernel_source(model)
     key = hashlib.sha256(src.encode()).hexdigest()[:16]
     if key in _LOADED:
         return _LOADED[key]
+    with _LOAD_LOCK:
+        if key not in _LOADED:
+            _LOADED[key] = _load_kernel(key, src)
+    return _LOADED[key]
+
+
+def _load_kernel(key: str, src: str):
+    """Write the kernel's source to the cache folder (atomically, only when it changed) and import it."""
     d = _cache_dir()
     path = d / f"k_{key}.py"
     if not path.exists() or path.read_text() != src:
@@ -459,8 +470,7 @@ def get_kernel(model: Model):
     mod = importlib.util.module_from_spec(spec)
     sys.modules[modname] = mod
     spec.loader.exec_module(mod)
-    _LOADED[key] = (mod.simulate, mod.simulate0)
-    return _LOADED[key]
+    return mod.simulate, mod.simulate0
 
 
 @dataclass
