@@ -9,9 +9,10 @@ folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate r
 ``error_model='numpy'`` (a division by zero gives inf/nan, caught as divergence, instead of a check per
 division): one compile per model *structure* and machine, reused
 across processes. Extension terms are a table evaluated inside the same kernel, so refitting a
-candidate extension never recompiles; the terms of an accepted model (``Model.compiled``) are written into
-its own kernel's source instead, since each interpreted term costs about a nominal right-hand side. Divergence (non-finite or beyond ``bound``) stops the loop and is
-reported with its sample index; a fixed-step loop cannot hang.
+candidate extension never recompiles; the terms of an accepted model (``Model.compiled``) are written
+into its own kernel's source instead, since each interpreted term costs about a nominal right-hand side.
+Divergence (non-finite or beyond ``bound``) stops the loop and is reported with its sample index; a
+fixed-step loop cannot hang.
 """
 
 from __future__ import annotations
