@@ -825,9 +825,20 @@ class Diagnoser:
         # significant"). A misfit too small to fail adequacy (MATERIAL_R2) still colours the residual,
         # and an AR noise model would take that colour for the noise's.
         significant = [t.name for t in adequacy if not t.passed]
+        final_tests = tests_of(current)[0]
+        # the residual battery as one family of tests (Holm at α): five tests at α each would call
+        # about 5 % of correct models "unexplained"
+        ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
+        rejected = [k.split(":", 1)[1] for k, v in stats.holm(ps, self.alpha).items() if v]
+        colour_only = bool(rejected) and all(n.startswith(COLOUR_TESTS) for n in rejected)
+        # nor may the residual be unstable: the CUSUM of recursive residuals, scaled by a HAC variance,
+        # keeps its size under stationary AR noise (tests/diagnosis/test_cusum.py, φ up to 0.95), so its
+        # rejection contradicts the coloured-noise explanation itself. (Not the CUSUM of squares: a noise
+        # level that changes over time is the heteroscedastic_noise family's own evidence.)
+        unstable = [n for n in rejected if n == "cusum" or n.startswith("cusum[")]
         gated = False      # the noise families were kept out by a significant (immaterial) structural test
         if noise_fams and len(findings) < self.max_findings:
-            if structural_ok and not significant:
+            if structural_ok and not significant and not unstable:
                 _log("noise families on the final model: " + ", ".join(noise_fams))
                 nf, noise_tests = diagnose_noise(current, prob, alpha=self.alpha, seed=self.seed,
                                                  n_boot=self.n_boot)
@@ -839,18 +850,15 @@ class Diagnoser:
             else:
                 why = ("the final model fails its adequacy tests" if not structural_ok else
                        "significant structural tests on the final model (" + ", ".join(significant) +
-                       "), each explaining less than the adequacy threshold")
+                       "), each explaining less than the adequacy threshold" if significant else
+                       "the CUSUM of the final model's recursive residuals leaves its bounds (" +
+                       ", ".join(unstable) + "): a slow systematic departure, which stationary coloured "
+                       "noise does not produce")
                 _log(f"noise families not tested: {why}")
                 gated = structural_ok
                 noise_tests = [stats.TestResult(f, float("nan"), float("nan"), None, False,
                                                 f"not tested: structure inadequate ({why})")
                                for f in noise_fams]
-        final_tests = tests_of(current)[0]
-        # the residual battery as one family of tests (Holm at α): five tests at α each would call
-        # about 5 % of correct models "unexplained"
-        ps = {f"{i}:{t.name}": t.p_value for i, t in enumerate(final_tests) if t.p_value == t.p_value}
-        rejected = [k.split(":", 1)[1] for k, v in stats.holm(ps, self.alpha).items() if v]
-        colour_only = bool(rejected) and all(n.startswith(COLOUR_TESTS) for n in rejected)
         if not structural_ok:
             verdict = "unexplained_discrepancy"
         elif findings:

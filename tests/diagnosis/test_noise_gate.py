@@ -7,6 +7,11 @@ The record is made here (exact zoh of a first-order system by scipy.signal.lfilt
 noise): with the true structure the coloured noise is named; the same record with one significant but
 immaterial adequacy row (p = 1e-4, 0.5 % of the residual) injected gets its noise families "not tested"
 with the reason, and the verdict says the discrepancy is unexplained, never "colored_noise".
+
+Nor when the final residual is unstable: a CUSUM of recursive residuals outside its bounds (HAC-scaled,
+so it keeps its size under AR noise) contradicts stationary coloured noise; a CUSUM of *squares* outside
+its bounds does not (a changing noise level is heteroscedastic_noise's own evidence). On correct
+structures with AR(1) noise up to φ = 0.95 the CUSUM gate lets the noise families run.
 """
 
 from __future__ import annotations
@@ -36,11 +41,25 @@ def _inject_immaterial_row(monkeypatch) -> None:
     monkeypatch.setattr(engine, "adequacy_tests", with_row)
 
 
-def _diagnose(tmp_path, monkeypatch, inject: bool):
-    rng = np.random.default_rng(11)
-    prob, model = _record(tmp_path, 0, rng, 0.9, False)
-    if inject:
+def _inject_battery_rejection(monkeypatch, name: str) -> None:
+    """The final residual battery's row ``name`` rejects (p = 1e-6), as a slow departure would make it."""
+    real = engine.residual_tests
+
+    def rejecting(fit, prob_, alpha):
+        tests, f_cyc = real(fit, prob_, alpha)
+        out = [stats.TestResult(t.name, 9.0, 1e-6, t.bound, False, "injected") if t.name == name else t
+               for t in tests]
+        return out, f_cyc
+    monkeypatch.setattr(engine, "residual_tests", rejecting)
+
+
+def _diagnose(tmp_path, monkeypatch, inject: bool | str, phi: float = 0.9, seed: int = 11):
+    rng = np.random.default_rng(seed)
+    prob, model = _record(tmp_path, 0, rng, phi, False)
+    if inject is True:
         _inject_immaterial_row(monkeypatch)
+    elif inject:
+        _inject_battery_rejection(monkeypatch, inject)
     dg = Diagnoser(prob, alpha=0.01, families=["colored_noise"], max_findings=2, seed=0, dt=0.1)
     with contextlib.redirect_stderr(io.StringIO()):
         return dg.run(model)
@@ -93,3 +112,31 @@ def test_a_finding_does_not_make_an_ungated_colour_explained(tmp_path, monkeypat
     else:
         assert fams == ["offset", "colored_noise"]
         assert d.verdict == "discrepancy"
+
+
+def test_an_unstable_residual_keeps_the_noise_families_out(tmp_path, monkeypatch):
+    d = _diagnose(tmp_path, monkeypatch, inject="cusum")
+    assert not d.findings
+    row = next(t for t in d.noise_tests if t.name == "colored_noise")
+    assert row.detail.startswith("not tested: structure inadequate") and "CUSUM" in row.detail
+    assert d.verdict == "unexplained_discrepancy"
+
+
+def test_a_changing_noise_level_does_not_keep_them_out(tmp_path, monkeypatch):
+    """cusum_squares rejecting is what heteroscedastic noise does: the noise families still run."""
+    d = _diagnose(tmp_path, monkeypatch, inject="cusum_squares")
+    assert [f["family"] for f in d.findings] == ["colored_noise"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("phi", [0.9, 0.95])
+def test_the_cusum_gate_keeps_coloured_noise_in_on_correct_structures(tmp_path, monkeypatch, phi):
+    """12 correct-structure records per φ (fresh seeds): the CUSUM gate keeps the noise families out of at
+    most one (the CUSUM is a 1 % test in the battery's Holm family; a gate that fired on AR noise would
+    call coloured noise "unexplained")."""
+    gated = 0
+    for seed in range(100, 112):
+        (tmp_path / f"s{seed}").mkdir()
+        d = _diagnose(tmp_path / f"s{seed}", monkeypatch, inject=False, phi=phi, seed=seed)
+        gated += any("CUSUM" in (t.detail or "") for t in d.noise_tests)
+    assert gated <= 1
