@@ -36,6 +36,13 @@ def ar1(rng: np.random.Generator, n: int, phi: float, burn: int = 300) -> np.nda
     return lfilter([1.0], [1.0, -phi], rng.standard_normal(n + burn))[burn:]
 
 
+def p_and_share(n: int, row_of) -> tuple[np.ndarray, np.ndarray]:
+    """The Monte Carlo loop of the size tests: p-values and explained shares (``r2``) of the test rows
+    ``row_of(k)``, k = 0..n−1, in that order (so the records' random draws stay the same)."""
+    rows = [row_of(k) for k in range(n)]
+    return np.array([r.p_value for r in rows]), np.array([r.r2 for r in rows])
+
+
 def with_noise(x: np.ndarray, noise: np.ndarray, level: float = 0.05) -> np.ndarray:
     """x plus ``noise`` scaled to ``level`` × std(x)."""
     return x + level * np.std(x) / np.std(noise) * noise

@@ -26,7 +26,7 @@ from pipeline.diagnostics.hausman import NAME, covariance_of_difference
 from pipeline.diagnostics.noise import diagnose_noise
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
-from tests.diagnosis.first_order import ar1, held_steps, problem, with_noise, zoh_first_order
+from tests.diagnosis.first_order import ar1, held_steps, p_and_share, problem, with_noise, zoh_first_order
 
 DT, N = 0.1, 800
 
@@ -56,17 +56,16 @@ def _hausman(tmp, k, rng, phi, second_order):
 @pytest.mark.parametrize("phi", [0.5, 0.9])
 def test_hausman_size_on_correct_structure_with_ar_noise(tmp_path, phi):
     rng = np.random.default_rng([31, int(10 * phi)])
-    p, share = [], []
-    for k in range(120):
+
+    def row_of(k):
         row, _ = _hausman(tmp_path, k, rng, phi, False)
         assert row is not None                  # AR(1) noise of this strength: Ljung-Box always fires
-        p.append(row.p_value)
-        share.append(row.r2)
-    p = np.array(p)
+        return row
+    p, share = p_and_share(120, row_of)
     assert np.mean(p < 0.05) <= 1.5 * 0.05
     assert np.mean(p < 0.01) <= 1.5 * 0.01 + 1 / 120     # at most 2 of 120 (binomial resolution)
     # the rule that turns a coloured-noise record into a structural misfit: significant and material
-    flagged = (p < 0.01) & (np.array(share) >= MATERIAL_R2)
+    flagged = (p < 0.01) & (share >= MATERIAL_R2)
     assert np.mean(flagged) <= 1.5 * 0.01 + 1 / 120
 
 

@@ -33,7 +33,7 @@ from pipeline.diagnostics.adequacy import MATERIAL_R2, adequacy_tests
 from pipeline.diagnostics.coherence import input_coherence
 from pipeline.diagnostics.stats import prewhiten_ar
 from pipeline.fit import fit_output_error
-from tests.diagnosis.first_order import ar1, held_steps, problem, with_noise, zoh_first_order
+from tests.diagnosis.first_order import ar1, held_steps, p_and_share, problem, with_noise, zoh_first_order
 
 DT, N = 0.1, 2000
 
@@ -122,14 +122,12 @@ def _record(tmp, k: int, rng: np.random.Generator, phi: float, mode_share: float
 @pytest.mark.parametrize("phi", [0.5, 0.9])
 def test_adequacy_row_size_on_a_correct_structure(tmp_path, phi):
     rng = np.random.default_rng([67, int(10 * phi)])
-    p, share = [], []
-    for k in range(600):
+
+    def row(k):
         fit, prob = _record(tmp_path, k, rng, phi, 0.0)
         sl = prob.split.est_slice()
-        t = input_coherence(fit.resid_est[:, 0], prob.U[sl, 0], 0.01, DT)
-        p.append(t.p_value)
-        share.append(t.r2)
-    p, share = np.array(p), np.array(share)
+        return input_coherence(fit.resid_est[:, 0], prob.U[sl, 0], 0.01, DT)
+    p, share = p_and_share(600, row)
     assert np.mean(p < 0.05) <= 1.5 * 0.05
     assert np.mean((p < 0.01) & (share >= MATERIAL_R2)) <= 0.01
 
