@@ -427,12 +427,24 @@ class Diagnoser:
         flat = [h for _, hyps in fams for h in hyps]
         if any(h.acts_from is not None for h in flat):
             self._current_states(fit)     # once, before the threads share it
+        grouped = {id(h) for h in flat if h.info.get("screen_group") is not None}
+
+        def sens_and_test(h):
+            """A hypothesis' sensitivities, and its test at once unless a screen group must rank it first."""
+            S = self.sensitivity(fit, h, ctx.X)
+            return S, (None if S is None or id(h) in grouped else self.statistic(fit, S))
+
         with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
-            sens = list(pool.map(lambda h: self.sensitivity(fit, h, ctx.X), flat))
+            # a likelihood-ratio screen's refit (_lr_screen) is the round's longest single job: submitted
+            # first, it runs beside the added-term tests instead of after them on one core
+            lr_jobs = {id(h): pool.submit(self._lr_refit, fit, h, ctx.X) for h in flat if h.info.get("lr_screen")}
+            both = list(pool.map(sens_and_test, flat))
+            sens = [S for S, _ in both]
             skip = self.screened_out(fit, flat, sens)
-            sens = [None if id(h) in skip else S for h, S in zip(flat, sens)]
-            results = dict(zip(map(id, flat), pool.map(lambda S: None if S is None else self.statistic(fit, S),
-                                                       sens)))
+            wait = [(h, S) for h, S in zip(flat, sens) if id(h) in grouped and id(h) not in skip and S is not None]
+            late = dict(zip([id(h) for h, _ in wait], pool.map(lambda hs: self.statistic(fit, hs[1]), wait)))
+            results = {id(h): (late.get(id(h)) if id(h) in grouped else wr) for h, (_, wr) in zip(flat, both)}
+            lr_done = {k: j.result() for k, j in lr_jobs.items()}
         for fam, hyps in fams:
             tested = [(h, results[id(h)]) for h in hyps if results[id(h)] is not None]
             if not tested:
@@ -449,7 +461,7 @@ class Diagnoser:
             best = Candidate(h, wr, 1.0, [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic,
                                            "p_value": wr.p_value, "dof": wr.dof}])
             best.p_family = min(1.0, p_min * len(hyps))
-            best = self._lr_screen(fit, fam, hyps, results, best)
+            best = self._lr_screen(fit, fam, hyps, results, best, lr_done)
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
@@ -491,19 +503,32 @@ class Diagnoser:
             c.evidence.append(ee)
         return [c]
 
-    def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate) -> Candidate:
+    def _lr_refit(self, fit: FitResult, h: Hypothesis, X: np.ndarray) -> tuple:
+        """(Wald result, refit) of an ``lr_screen`` hypothesis, computed as :meth:`_lr_screen` would: its
+        added-term test (the refit's start) and the family's refit from it. Deterministic, so running it
+        in the pool beside the other tests changes no number."""
+        S = self.sensitivity(fit, h, X)
+        wr = None if S is None else self.statistic(fit, S)
+        return wr, self.estimate(fit, Candidate(h, wr, 1.0, []))
+
+    def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate,
+                   done: dict | None = None) -> Candidate:
         """A family may mark one hypothesis ``info['lr_screen']``: a large, strongly nonlinear effect
         (a hard end stop) whose linearised added-term test has little power. That hypothesis is
         refitted now and tested by the likelihood-ratio test with the effective sample size
         (:func:`stats.lr_test`); the family's p-value is then Bonferroni over its two tests,
-        2·min(p_Wald, p_LR), and the candidate is the one whose test is smaller (its refit kept)."""
+        2·min(p_Wald, p_LR), and the candidate is the one whose test is smaller (its refit kept).
+        ``done``: refits computed ahead by :meth:`_lr_refit`, used when started from the same test."""
         lr_h = next((h for h in hyps if h.info.get("lr_screen")), None)
         if lr_h is None:
             return best
         best.p_family = min(1.0, 2.0 * best.p_family)
         wr = results.get(id(lr_h))
         cand = Candidate(lr_h, wr, 1.0, [])
-        f = self.estimate(fit, cand)
+        ahead = (done or {}).get(id(lr_h))
+        # the refit computed ahead started from the hypothesis' own test; it is used when this one's
+        # start is that test too (not screened out of it)
+        f = ahead[1] if ahead is not None and (ahead[0] is None) == (wr is None) else self.estimate(fit, cand)
         if f is None:
             return best
         lr = lr_against(fit, f, self.alpha, len(lr_h.searched))
