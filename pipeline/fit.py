@@ -27,7 +27,11 @@ from the same values as the estimation segment for unmeasured ones.
 
 from __future__ import annotations
 
+import inspect
 import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +43,9 @@ from .model import Model, rhs_vectorized
 from .simulate import outputs, simulate_states
 
 RANK_RTOL = 1e-7
+# threads for the columns of a finite-difference Jacobian (scipy >= 1.16 takes a map as ``workers``)
+JACOBIAN_THREADS = max(1, min(4, os.cpu_count() or 1))
+_LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters
 
 
 @dataclass
@@ -355,6 +362,14 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         return m, x0
 
     calls = [0, math.inf]          # simulations run, lowest SSE seen
+    deferred = threading.local()   # set in the Jacobian's worker threads: counted afterwards, in order
+
+    def count(r):
+        calls[0] += 1
+        calls[1] = min(calls[1], float(r @ r))
+        if calls[0] >= abandon_after and calls[1] > abandon_above:
+            raise RefitAbandoned(f"abandoned after {calls[0]} simulations: its error stayed at "
+                                 f"{calls[1] / abandon_above:.3g} x the current model's or more")
 
     def resid(th):
         m, x0 = unpack(th)
@@ -363,13 +378,30 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             r = penalty
         else:
             r = ((yobs - Yh[est[0]:stop]) * w * sw).ravel()
-        if abandon_above is not None:
-            calls[0] += 1
-            calls[1] = min(calls[1], float(r @ r))
-            if calls[0] >= abandon_after and calls[1] > abandon_above:
-                raise RefitAbandoned(f"abandoned after {calls[0]} simulations: its error stayed at "
-                                     f"{calls[1] / abandon_above:.3g} x the current model's or more")
+        if abandon_above is not None and not getattr(deferred, "on", False):
+            count(r)
         return r
+
+    def jacobian_map(fun, xs):
+        """scipy's finite-difference Jacobian columns (one simulation each) evaluated in threads (the
+        kernel releases the GIL). scipy forms J from the returned values exactly as from its serial map,
+        and the abandon rule is applied afterwards to the results in column order, so the fit, its
+        Jacobian and the point where a refit is abandoned are the same as when run serially."""
+        xs = list(xs)
+
+        def one(x):
+            deferred.on = True
+            try:
+                return fun(x)
+            finally:
+                deferred.on = False
+
+        with ThreadPoolExecutor(max_workers=min(len(xs), JACOBIAN_THREADS) or 1) as pool:
+            rs = list(pool.map(one, xs))
+        if abandon_above is not None:
+            for r in rs:
+                count(np.asarray(r, float))
+        return rs
 
     if len(th0):
         r0 = resid(th0)
@@ -380,8 +412,9 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
             raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
                                   "(model.params, model.initial)")
+        par = {"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1 else {}
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
-                            f_scale=f_scale)
+                            f_scale=f_scale, **par)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)
         if loss != "linear":
             # scipy's jac is loss-modified; the covariance needs the plain residual's Jacobian at θ̂

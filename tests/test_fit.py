@@ -65,3 +65,32 @@ def test_refit_is_abandoned_only_when_it_stays_above_the_bound():
         fit_output_error(bad_start, prob, abandon_above=1e-12, abandon_after=8)
     again = fit_output_error(_nominal("msd"), prob, abandon_above=1.0 + good.sse_w * 1e3, abandon_after=8)
     np.testing.assert_array_equal(again.theta, good.theta)
+
+
+def test_threaded_jacobian_gives_the_serial_fit_and_abandons_at_the_same_simulation(monkeypatch):
+    """fit_output_error evaluates the finite-difference Jacobian's columns in threads (scipy's
+    ``workers``). The fit must be the serial one bit for bit (parameters, Jacobian, SSE, evaluation
+    count), and a refit abandoned mid-Jacobian must stop at the same simulation with the same message:
+    the abandon rule is replayed on the threaded results in column order."""
+    import pipeline.fit as F
+    from pipeline.errors import RefitAbandoned
+    if not F._LSQ_WORKERS:
+        pytest.skip("this scipy's least_squares takes no workers")
+    syn = generate("msd", "none", 0, noise=0.02)
+    prob = _problem(syn, ["x"])
+    start = _nominal("msd").with_params({"c": 1.2, "k": 2.5})
+
+    def run(threads, **kw):
+        monkeypatch.setattr(F, "JACOBIAN_THREADS", threads)
+        try:
+            return fit_output_error(start, prob, **kw)
+        except RefitAbandoned as exc:
+            return str(exc)
+
+    serial, threaded = run(1), run(4)
+    assert np.array_equal(serial.theta, threaded.theta) and np.array_equal(serial.jac, threaded.jac)
+    assert serial.sse_w == threaded.sse_w and serial.nfev == threaded.nfev
+    # abandoned inside a Jacobian (the 2nd and 3rd simulations are its columns): same count, same message
+    for after in (2, 3, 5):
+        a, b = run(1, abandon_above=1e-12, abandon_after=after), run(4, abandon_above=1e-12, abandon_after=after)
+        assert isinstance(a, str) and a == b and f"after {after} simulations" in a
