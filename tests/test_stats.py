@@ -128,3 +128,24 @@ def test_passed_follows_the_p_value_and_white_records_pass_at_the_nominal_rate()
     # Bonferroni is conservative: at most 1.5 α, and not absurdly conservative either
     assert rej_a / 600 <= 0.015 and rej_x / 600 <= 0.015
     assert rej_a + rej_x >= 1
+
+
+def test_column_basis_projects_like_lstsq_and_the_test_is_unchanged():
+    """stats.column_basis(J) is computed once per fit and replaces each test's lstsq(J, S): U_r U_rᵀ S
+    must equal J lstsq(J, S) (J J⁺ = U_r U_rᵀ), and the added-term test with the basis must give the
+    same statistic and p-value as without it; a collinear J keeps only its rank's directions."""
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(3)
+    n = 3000
+    J = lfilter([1], [1, -0.9], rng.standard_normal((n, 4)), axis=0)
+    S = lfilter([1], [1, -0.9], rng.standard_normal((n, 2)), axis=0) + 0.3 * J[:, :2]
+    e = lfilter([1], [1, -0.95], rng.standard_normal(n)) + 0.05 * S[:, 0]
+    B = stats.column_basis(J)
+    assert B.shape == (n, 4)
+    np.testing.assert_allclose(B @ (B.T @ S), J @ np.linalg.lstsq(J, S, rcond=None)[0], rtol=0, atol=1e-10 * np.abs(S).max())
+    a, b = stats.added_terms_test(e, J, S), stats.added_terms_test(e, J, S, basis=B)
+    assert b.statistic == pytest.approx(a.statistic, rel=1e-9) and b.p_value == pytest.approx(a.p_value, rel=1e-9)
+    Jc = np.column_stack([J, J[:, 0] - 2.0 * J[:, 1]])          # rank 4 of 5
+    assert stats.column_basis(Jc).shape == (n, 4)
+    c, d = stats.added_terms_test(e, Jc, S, basis=stats.column_basis(Jc)), stats.added_terms_test(e, Jc, S)
+    assert c.statistic == pytest.approx(d.statistic, rel=1e-6) and c.p_value == pytest.approx(d.p_value, rel=1e-6)

@@ -305,7 +305,15 @@ class Diagnoser:
 
     def statistic(self, fit: FitResult, S: np.ndarray) -> stats.WaldResult:
         e = (fit.resid_est * self.w).ravel()
-        return stats.added_terms_test(e, fit.jac, S)
+        return stats.added_terms_test(e, fit.jac, S, basis=self._basis(fit))
+
+    def _basis(self, fit: FitResult) -> np.ndarray:
+        """:func:`stats.column_basis` of the fit's Jacobian, computed once per fit (every hypothesis'
+        test projects on it); call it before threads share it."""
+        cached = getattr(self, "_basis_cache", None)
+        if cached is None or cached[0] is not fit:
+            self._basis_cache = cached = (fit, None if fit.jac is None else stats.column_basis(fit.jac))
+        return cached[1]
 
     def sensitivity(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> np.ndarray | None:
         """(n_est·ny, q) finite-difference output sensitivities (weighted) of the hypothesis'
@@ -428,6 +436,7 @@ class Diagnoser:
         if any(h.acts_from is not None for h in flat):
             self._current_states(fit)     # once, before the threads share it
         grouped = {id(h) for h in flat if h.info.get("screen_group") is not None}
+        self._basis(fit)                  # once, before the threads share it
 
         def sens_and_test(h):
             """A hypothesis' sensitivities, and its test at once unless a screen group must rank it first."""
@@ -829,6 +838,11 @@ class Diagnoser:
             cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
             last_p = {c.hyp.family: c.p_family for c in cands}
             last_r2 = _family_r2(cands)
+        # the nominal model's adequacy (reported beside the final one) is independent of the final model's:
+        # computed in a second thread meanwhile
+        side = ThreadPoolExecutor(max_workers=1)
+        nominal_adequacy = side.submit(adequacy_tests, nominal, prob, self.alpha)
+        side.shutdown(wait=False)
         adequacy = adequacy_tests(current, prob, self.alpha)
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
@@ -902,7 +916,7 @@ class Diagnoser:
         if fb is not None:
             tests0 = list(tests0) + [fb]
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
-                         adequacy=adequacy, adequacy_nominal=adequacy_tests(nominal, prob, self.alpha),
+                         adequacy=adequacy, adequacy_nominal=nominal_adequacy.result(),
                          verdict=verdict, where=where)
 
     RUNNER_UP_DBIC = 10.0   # accepted alternatives within this ΔBIC of the finding are listed with it

@@ -355,7 +355,20 @@ class WaldResult:
     r2: float = 0.0      # share of the residual's sum of squares the added columns explain (partial R²)
 
 
-def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray) -> WaldResult:
+def column_basis(J: np.ndarray) -> np.ndarray:
+    """Orthonormal basis U_r of the column space of J as ``np.linalg.lstsq`` sees it: the left singular
+    vectors whose singular values exceed its default cutoff ε·max(N, k)·σ_max, so that
+    S − U_r U_rᵀ S = S − J lstsq(J, S) (J J⁺ = U_r U_rᵀ; Golub & Van Loan 2013, §5.5.4). Computed once
+    for a fit, it serves every hypothesis' test against that fit (:func:`added_terms_test`)."""
+    J = np.asarray(J, float)
+    if not J.size:
+        return np.zeros((J.shape[0], 0))
+    u, sv, _ = np.linalg.svd(J, full_matrices=False)
+    keep = sv > np.finfo(float).eps * max(J.shape) * (sv[0] if len(sv) else 0.0)
+    return np.ascontiguousarray(u[:, keep])
+
+
+def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndarray | None = None) -> WaldResult:
     """Does adding the columns S (output sensitivities of new parameters) explain the residual e,
     beyond the current parameters' sensitivities J? Regress e on S⊥ = (I − J J⁺) S (Frisch–Waugh),
     Wald statistic W = βᵀ V⁻¹ β with V the sandwich A⁻¹ Ω A⁻¹, A = S⊥ᵀS⊥.
@@ -372,7 +385,9 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray) -> WaldResult:
     Orcutt 1949): an AR(p) fitted to the unrestricted OLS residual filters e, J and S. Without it the
     EWC estimate of very smooth scores keeps few degrees of freedom and the test lost its power on
     large misfits (an input saturation explaining 88 % of the validation error was not significant);
-    the Monte Carlo size tests (``tests/diagnosis/test_mc_calibration.py``) hold with it."""
+    the Monte Carlo size tests (``tests/diagnosis/test_mc_calibration.py``) hold with it.
+
+    ``basis``: :func:`column_basis` of J, when many tests share J (the same projection, computed once)."""
     S = np.atleast_2d(S.T).T
     e = np.asarray(e, float)
     J = np.asarray(J, float).reshape(len(e), -1)
@@ -380,7 +395,10 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray) -> WaldResult:
         # feasible GLS (Cochrane & Orcutt 1949): an AR(p) (Yule–Walker, p ≤ GLS_PMAX by AIC) fitted to
         # the unrestricted OLS residual filters e, J and S alike, so the long-run variance below is that
         # of nearly white scores and keeps its degrees of freedom when the residual is very smooth
-        S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
+        if basis is not None:
+            S0 = S - basis @ (basis.T @ S)
+        else:
+            S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
         eu0 = e - S0 @ np.linalg.lstsq(S0, e, rcond=None)[0]
         _, a = prewhiten_ar(eu0, GLS_PMAX)
         if len(a) and len(e) > 4 * (len(a) + S.shape[1] + J.shape[1]):
