@@ -10,6 +10,7 @@ from .base import Context, Family, Hypothesis, pname
 
 class DeadZone(Family):
     id = "dead_zone"
+    null_is_current = True   # sign(u)·maximum(|u| − 0, 0) is u: the test reuses the fit's simulation
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model

@@ -18,6 +18,7 @@ def _clip(u: str, L: str, symmetric: bool) -> str:
 
 class InputSaturation(Family):
     id = "input_saturation"
+    null_is_current = True   # u − 0·(u − clip(u, ·, L)) is u: the test reuses the fit's simulation
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model

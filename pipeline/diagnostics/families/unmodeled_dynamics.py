@@ -12,6 +12,7 @@ TAUS = (1.0, 2.5, 6.0, 15.0, 40.0)
 
 class UnmodeledDynamics(Family):
     id = "unmodeled_dynamics"
+    null_is_current = True   # u − 0·(u − u_a) is u (the lag state runs but feeds nothing): the test reuses the fit's simulation
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model
