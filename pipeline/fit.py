@@ -43,8 +43,12 @@ from .model import Model, rhs_vectorized
 from .simulate import outputs, simulate_states
 
 RANK_RTOL = 1e-7
-# threads for the columns of a finite-difference Jacobian (scipy >= 1.16 takes a map as ``workers``)
+# threads for the columns of a finite-difference Jacobian (scipy >= 1.16 takes a map as ``workers``),
+# from this many simulated steps (samples x substeps) per simulation: below it a simulation takes a few
+# milliseconds, and thread hand-offs cost more than they save (the 2 000-sample diagnosis bench ran 20 %
+# slower with threads on every fit)
 JACOBIAN_THREADS = max(1, min(4, os.cpu_count() or 1))
+JACOBIAN_THREADS_MIN_STEPS = 50_000
 _LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters
 
 
@@ -412,7 +416,9 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
             raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
                                   "(model.params, model.initial)")
-        par = {"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1 else {}
+        steps = (stop - prob.fit_segment()[0]) * model.substeps
+        par = ({"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1
+               and steps >= JACOBIAN_THREADS_MIN_STEPS else {})
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
                             f_scale=f_scale, **par)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)

@@ -80,6 +80,8 @@ def test_threaded_jacobian_gives_the_serial_fit_and_abandons_at_the_same_simulat
     prob = _problem(syn, ["x"])
     start = _nominal("msd").with_params({"c": 1.2, "k": 2.5})
 
+    monkeypatch.setattr(F, "JACOBIAN_THREADS_MIN_STEPS", 0)      # this short record takes the threaded path too
+
     def run(threads, **kw):
         monkeypatch.setattr(F, "JACOBIAN_THREADS", threads)
         try:
@@ -87,7 +89,13 @@ def test_threaded_jacobian_gives_the_serial_fit_and_abandons_at_the_same_simulat
         except RefitAbandoned as exc:
             return str(exc)
 
-    serial, threaded = run(1), run(4)
+    pools = []
+    real_pool = F.ThreadPoolExecutor
+    monkeypatch.setattr(F, "ThreadPoolExecutor", lambda **kw: pools.append(kw) or real_pool(**kw))
+    serial = run(1)
+    assert not pools
+    threaded = run(4)
+    assert pools                                                  # the threaded path ran
     assert np.array_equal(serial.theta, threaded.theta) and np.array_equal(serial.jac, threaded.jac)
     assert serial.sse_w == threaded.sse_w and serial.nfev == threaded.nfev
     # abandoned inside a Jacobian (the 2nd and 3rd simulations are its columns): same count, same message
