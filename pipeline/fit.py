@@ -304,6 +304,12 @@ def score_rows(J: np.ndarray, r: np.ndarray, ny: int) -> np.ndarray:
     return g.reshape(-1, ny, J.shape[1]).sum(axis=1)
 
 
+def estimated_x0(fit: FitResult) -> dict[str, float]:
+    """The fit's estimated initial states {"x0.<state>": value}: the start of a refit of an extension of
+    its model (``fit_output_error(start=...)``), so the refit begins where the current fit ended."""
+    return {n: float(v) for n, v in zip(fit.names, fit.theta) if n.startswith("x0.")}
+
+
 def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None:
     """LS on ẋ − f(x, u; θ) when every state is measured (fast start for the output-error fit)."""
     if model.extra_states or not all(s in prob.out_names for s in model.states) or not model.free:
@@ -352,7 +358,10 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         sw = sw[:, None]
     x0_names = [f"x0.{s}" for s in model.states if model.initial[s] == "estimate"]
     names = list(model.free) + x0_names
-    x0_base = initial_state(model, prob, at=prob.fit_segment()[0])
+    # an estimated initial state starts from ``start``'s "x0.<state>" when given (a refit from the current
+    # fit: at its null the refit's first simulation is then the current fit's own), else from the data
+    x0_start = {k: v for k, v in (start or {}).items() if k in x0_names}
+    x0_base = initial_state(model, prob, values=x0_start or None, at=prob.fit_segment()[0])
     th0 = np.array([(start or {}).get(k, model.params[k]) for k in model.free]
                    + [x0_base[model.states.index(n[3:])] for n in x0_names], dtype=float)
     nfree = len(model.free)

@@ -102,3 +102,27 @@ def test_threaded_jacobian_gives_the_serial_fit_and_abandons_at_the_same_simulat
     for after in (2, 3, 5):
         a, b = run(1, abandon_above=1e-12, abandon_after=after), run(4, abandon_above=1e-12, abandon_after=after)
         assert isinstance(a, str) and a == b and f"after {after} simulations" in a
+
+
+def test_a_refit_starts_from_the_current_fits_estimated_initial_state():
+    """A refit of an extension (engine.refit, the families' searches) passes the current fit's estimated
+    initial states as ``start`` (fit.estimated_x0). Refitting the fitted model itself from there, its first
+    simulation is the fit's own (SSE equal, so a refit abandoned above the current error is never
+    abandoned at its null); without it x0 restarts from the measured first sample, which on a noisy
+    record is worse than the current fit, and the same refit is abandoned at once."""
+    from dataclasses import replace
+    from pipeline.errors import RefitAbandoned
+    from pipeline.fit import estimated_x0
+    from pipeline.simulate import simulate_states
+    syn = generate("tank", "none", 0, noise=0.0)
+    m = replace(_nominal("tank"), initial={"h": "estimate"})
+    X = simulate_states(m, syn.t, syn.u[:, None], np.array([1.7])).X[:, 0]
+    y = X + 0.05 * np.random.default_rng(1).standard_normal(len(X))
+    prob = Problem(syn.t, syn.u[:, None], y[:, None], ["h"], Split((0, 2000), (2000, 3000)), bound=1e6)
+    fit = fit_output_error(m, prob)
+    x0 = estimated_x0(fit)
+    assert list(x0) == ["x0.h"] and x0["x0.h"] == pytest.approx(1.7, abs=0.05) and abs(y[0] - x0["x0.h"]) > 0.01
+    again = fit_output_error(fit.model, prob, start=x0, abandon_above=fit.sse_w * (1 + 1e-9), abandon_after=1)
+    assert again.sse_w <= fit.sse_w * (1 + 1e-9)
+    with pytest.raises(RefitAbandoned):
+        fit_output_error(fit.model, prob, abandon_above=fit.sse_w * (1 + 1e-9), abandon_after=1)

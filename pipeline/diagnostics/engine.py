@@ -34,7 +34,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import criteria
-from ..fit import FitResult, Problem, fit_output_error, simulate_until, states_full
+from ..fit import FitResult, Problem, estimated_x0, fit_output_error, simulate_until, states_full
 from ..model import Model, rhs_vectorized, term_on
 from ..simulate import outputs, simulate_states
 from . import stats
@@ -393,7 +393,7 @@ class Diagnoser:
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
                 # abandoned if still above the current model's error after about four iterations
-                f = fit_output_error(m, self.prob, abandon_above=fit.sse_w * (1 + 1e-9),
+                f = fit_output_error(m, self.prob, start=estimated_x0(fit), abandon_above=fit.sse_w * (1 + 1e-9),
                                      abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
             except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:
                 why.append(f"from {scale:g} x the test's estimate: {exc}")

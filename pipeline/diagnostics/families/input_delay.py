@@ -5,7 +5,7 @@ when the profile's best is below a quarter sample, from the added-term test's jo
 
 import numpy as np
 
-from ...fit import fit_output_error
+from ...fit import estimated_x0, fit_output_error
 from ...model import fresh_name
 from .base import Context, Family, Hypothesis
 
@@ -53,7 +53,7 @@ class InputDelay(Family):
                 cand.reason = "best delay below a quarter sample"
                 return None
             d = b
-        return fit_output_error(fit.model.extend([], {name: d}, delay=name), dg.prob)
+        return fit_output_error(fit.model.extend([], {name: d}, delay=name), dg.prob, start=estimated_x0(fit))
 
     def describe(self, hyp, fit, val, sd):
         d = float(fit.model.params[fit.model.delay])

@@ -11,7 +11,7 @@ free parameters), t_j fixed in the final refit and counted as an estimated param
 
 import numpy as np
 
-from ...fit import fit_output_error
+from ...fit import estimated_x0, fit_output_error
 from ...model import Rewrite
 from .base import Context, Family, Hypothesis, pname
 
@@ -50,7 +50,7 @@ class ParameterJump(Family):
         def refit(tj):
             h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
             try:
-                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, max_nfev=60)
+                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, start=estimated_x0(fit), max_nfev=60)
             except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
                 from ...errors import InputError
                 if isinstance(exc, InputError):
@@ -80,7 +80,7 @@ class ParameterJump(Family):
         best = fc if sse(fc) < sse(fd) else fd
         if best is None:
             return None
-        return fit_output_error(best.model, dg.prob)
+        return fit_output_error(best.model, dg.prob, start=estimated_x0(best))
 
     def describe(self, hyp, fit, val, sd):
         k = hyp.parameter
