@@ -45,8 +45,8 @@ from .simulate import outputs, simulate_states
 RANK_RTOL = 1e-7
 # threads for the columns of a finite-difference Jacobian (scipy >= 1.16 takes a map as ``workers``),
 # from this many simulated steps (samples x substeps) per simulation: below it a simulation takes a few
-# milliseconds, and thread hand-offs cost more than they save (the 2 000-sample diagnosis bench ran 20 %
-# slower with threads on every fit)
+# milliseconds, a thread hand-off is a large share of that, and the callers already run fits in parallel
+# (the diagnosis bench's 2 000-sample records stay serial)
 JACOBIAN_THREADS = max(1, min(4, os.cpu_count() or 1))
 JACOBIAN_THREADS_MIN_STEPS = 50_000
 _LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters

@@ -443,17 +443,21 @@ class Diagnoser:
             S = self.sensitivity(fit, h, ctx.X)
             return S, (None if S is None or id(h) in grouped else self.statistic(fit, S))
 
+        # a likelihood-ratio screen's hypothesis (_lr_screen) gets its test and its refit in one job, the
+        # round's longest: submitted first, it runs beside the other tests instead of after them on one core
+        lr_hyps = [h for h in flat if h.info.get("lr_screen")]
+        rest = [h for h in flat if not h.info.get("lr_screen")]
         with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
-            # a likelihood-ratio screen's refit (_lr_screen) is the round's longest single job: submitted
-            # first, it runs beside the added-term tests instead of after them on one core
-            lr_jobs = {id(h): pool.submit(self._lr_refit, fit, h, ctx.X) for h in flat if h.info.get("lr_screen")}
-            both = list(pool.map(sens_and_test, flat))
+            lr_jobs = [pool.submit(self._lr_refit, fit, h, ctx.X) for h in lr_hyps]
+            both = list(pool.map(sens_and_test, rest))
             sens = [S for S, _ in both]
-            skip = self.screened_out(fit, flat, sens)
-            wait = [(h, S) for h, S in zip(flat, sens) if id(h) in grouped and id(h) not in skip and S is not None]
+            skip = self.screened_out(fit, rest, sens)
+            wait = [(h, S) for h, S in zip(rest, sens) if id(h) in grouped and id(h) not in skip and S is not None]
             late = dict(zip([id(h) for h, _ in wait], pool.map(lambda hs: self.statistic(fit, hs[1]), wait)))
-            results = {id(h): (late.get(id(h)) if id(h) in grouped else wr) for h, (_, wr) in zip(flat, both)}
-            lr_done = {k: j.result() for k, j in lr_jobs.items()}
+            results = {id(h): (late.get(id(h)) if id(h) in grouped else wr) for h, (_, wr) in zip(rest, both)}
+            lr_done = {}
+            for h, j in zip(lr_hyps, lr_jobs):
+                results[id(h)], lr_done[id(h)] = j.result()
         for fam, hyps in fams:
             tested = [(h, results[id(h)]) for h in hyps if results[id(h)] is not None]
             if not tested:
@@ -513,9 +517,8 @@ class Diagnoser:
         return [c]
 
     def _lr_refit(self, fit: FitResult, h: Hypothesis, X: np.ndarray) -> tuple:
-        """(Wald result, refit) of an ``lr_screen`` hypothesis, computed as :meth:`_lr_screen` would: its
-        added-term test (the refit's start) and the family's refit from it. Deterministic, so running it
-        in the pool beside the other tests changes no number."""
+        """(Wald result, refit) of an ``lr_screen`` hypothesis: its added-term test, and the family's refit
+        started from that test's estimate."""
         S = self.sensitivity(fit, h, X)
         wr = None if S is None else self.statistic(fit, S)
         return wr, self.estimate(fit, Candidate(h, wr, 1.0, []))
@@ -527,17 +530,14 @@ class Diagnoser:
         refitted now and tested by the likelihood-ratio test with the effective sample size
         (:func:`stats.lr_test`); the family's p-value is then Bonferroni over its two tests,
         2·min(p_Wald, p_LR), and the candidate is the one whose test is smaller (its refit kept).
-        ``done``: refits computed ahead by :meth:`_lr_refit`, used when started from the same test."""
+        ``done``: the refits :meth:`_lr_refit` computed beside the other tests, by hypothesis id."""
         lr_h = next((h for h in hyps if h.info.get("lr_screen")), None)
         if lr_h is None:
             return best
         best.p_family = min(1.0, 2.0 * best.p_family)
         wr = results.get(id(lr_h))
         cand = Candidate(lr_h, wr, 1.0, [])
-        ahead = (done or {}).get(id(lr_h))
-        # the refit computed ahead started from the hypothesis' own test; it is used when this one's
-        # start is that test too (not screened out of it)
-        f = ahead[1] if ahead is not None and (ahead[0] is None) == (wr is None) else self.estimate(fit, cand)
+        f = done[id(lr_h)] if done and id(lr_h) in done else self.estimate(fit, cand)
         if f is None:
             return best
         lr = lr_against(fit, f, self.alpha, len(lr_h.searched))
@@ -840,10 +840,10 @@ class Diagnoser:
             last_r2 = _family_r2(cands)
         # the nominal model's adequacy (reported beside the final one) is independent of the final model's:
         # computed in a second thread meanwhile
-        side = ThreadPoolExecutor(max_workers=1)
-        nominal_adequacy = side.submit(adequacy_tests, nominal, prob, self.alpha)
-        side.shutdown(wait=False)
-        adequacy = adequacy_tests(current, prob, self.alpha)
+        with ThreadPoolExecutor(max_workers=1) as side:
+            job = side.submit(adequacy_tests, nominal, prob, self.alpha)
+            adequacy = adequacy_tests(current, prob, self.alpha)
+            nominal_adequacy = job.result()
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
             # not accepted: a direction the model misses that no family's extension explains
@@ -916,7 +916,7 @@ class Diagnoser:
         if fb is not None:
             tests0 = list(tests0) + [fb]
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
-                         adequacy=adequacy, adequacy_nominal=nominal_adequacy.result(),
+                         adequacy=adequacy, adequacy_nominal=nominal_adequacy,
                          verdict=verdict, where=where)
 
     RUNNER_UP_DBIC = 10.0   # accepted alternatives within this ΔBIC of the finding are listed with it
