@@ -288,7 +288,38 @@ def _check_parent(target: Path, shown: str, *, default: bool) -> None:
         raise _err(shown, f"cannot create a folder in {parent}: {exc.strerror}") from None
 
 
+@contextlib.contextmanager
+def _inspect_lock(target: Path) -> Iterator[None]:
+    """Shared flock on what :func:`_publish_lock` locks, held while a target is inspected, so a check
+    never sees a concurrent publish half-way (between its two renames the target is briefly absent,
+    and a check that had just seen it would call it foreign). Best effort: where nothing can be
+    locked (a missing parent, a filesystem without flock) the check runs unlocked and
+    :func:`publish` still re-checks under the exclusive lock."""
+    fd = -1
+    for path, flags in ((target.parent, os.O_RDONLY | os.O_DIRECTORY),
+                        (target.parent / f".{target.name}.lock", os.O_RDONLY)):
+        try:
+            fd = os.open(path, flags)
+            fcntl.flock(fd, fcntl.LOCK_SH)
+            break
+        except OSError:
+            if fd >= 0:
+                os.close(fd)
+            fd = -1
+    try:
+        yield
+    finally:
+        if fd >= 0:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+
 def _check_existing(target: Path, shown: str) -> None:
+    with _inspect_lock(target):
+        _check_existing_unlocked(target, shown)
+
+
+def _check_existing_unlocked(target: Path, shown: str) -> None:
     try:
         st = os.lstat(target)
     except FileNotFoundError:

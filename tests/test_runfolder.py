@@ -159,6 +159,38 @@ def test_publish_refuses_a_target_that_got_user_files_during_the_run(tmp_path):
     assert (target / "precious.txt").read_text() == "created while the run was analysing\n"
 
 
+def test_check_waits_for_a_concurrent_publish_instead_of_seeing_its_half_way_state(tmp_path):
+    """Between a publish's two renames the target is absent; a check that had just seen it there
+    called it foreign ("holds files this tool did not write"): CI failure of 2026-12-03, four
+    concurrent runs of one config. The check now inspects under a shared lock on the parent."""
+    import threading
+    target = _make_run(tmp_path / "run", {"summary.json": "old\n"})
+    tmp = rf.make_temp(target)
+    (tmp / "summary.json").write_text("new\n")
+    rf.finalize(tmp, "demo-1")
+    outcome: list = []
+
+    def check():
+        try:
+            outcome.append(rf.check_target(target, inputs=[], default=False))
+        except InputError as exc:   # pragma: no cover - the failure this test guards against
+            outcome.append(exc)
+
+    with rf._publish_lock(target):                       # a publisher, half-way through its swap
+        old = tmp_path / ".run.old-1-00000000"
+        os.rename(target, old)
+        th = threading.Thread(target=check)
+        th.start()
+        th.join(0.5)
+        assert th.is_alive(), "the check did not wait for the publisher's lock"
+        os.rename(tmp, target)
+        import shutil
+        shutil.rmtree(old)
+    th.join(10)
+    assert outcome == [target.resolve()]
+    assert (target / "summary.json").read_text() == "new\n"
+
+
 def test_publish_does_not_follow_a_symlink_planted_during_the_run(tmp_path):
     (tmp_path / "victim").mkdir()
     (tmp_path / "victim" / "keep.txt").write_text("keep\n")
