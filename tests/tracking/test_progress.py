@@ -27,22 +27,40 @@ def test_stage_prints_start_and_done_with_items(out):
     assert st.items == 5
 
 
+class _Clock:
+    """A stand-in for the ``time`` module in :mod:`pipeline.progress`: the test advances it, so a loaded
+    machine (whose sleeps overrun) cannot change how many lines a bar prints."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+
 def test_bar_prints_at_most_every_interval(out, monkeypatch):
+    clock = _Clock()
+    monkeypatch.setattr(progress, "time", clock)
     monkeypatch.setattr(progress, "BAR_INTERVAL_S", 0.05)
     monkeypatch.setattr(progress, "HEARTBEAT_S", 100.0)
     with progress.stage("mcmc"):
         for _ in progress.bar(range(20), 20, "steps"):
-            time.sleep(0.011)
+            clock.now += 0.011
     bars = [line for line in out.getvalue().splitlines() if "steps" in line]
-    # 20 × 11 ms = 0.22 s at most one line per 50 ms: between 2 and 6 lines, the last one 20/20
+    # 20 items of 11 ms = 0.22 s, at most one line per 50 ms: 4 intermediate lines and the final 20/20
+    # (one line per item, the behaviour this guards against, would print 20)
     assert 2 <= len(bars) <= 6 and "20/20" in bars[-1]
 
 
 def test_heartbeat_breaks_silence(out, monkeypatch):
     monkeypatch.setattr(progress, "HEARTBEAT_S", 0.1)
     with progress.stage("diagnose"):
-        time.sleep(0.45)
+        deadline = time.monotonic() + 10.0     # a loaded machine may schedule the heartbeat late
+        while "still running" not in out.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        silent_for = time.monotonic() - (deadline - 10.0)
     assert "[diagnose] ... still running" in out.getvalue()
+    assert silent_for >= 0.1                    # not before HEARTBEAT_S of silence
 
 
 def test_failed_stage_says_failed(out):
