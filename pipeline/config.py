@@ -314,8 +314,13 @@ def _as_map(v: list[str] | dict[str, str]) -> dict[str, str]:
     return {c: c for c in v} if isinstance(v, list) else dict(v)
 
 
+# pydantic's location tags of the validators a value went through (not keys of the config)
+_LOC_TAGS = ("function-", "literal[", "union[", "dict[", "list[", "tuple[", "set[", "nullable[",
+             "tagged-union[", "json-or-python[", "lax-or-strict[", "constrained-")
+
+
 def _fmt_loc(loc: tuple) -> str:
-    return ".".join(str(x) for x in loc if not str(x).startswith(("function-", "literal[", "union[")))
+    return ".".join(str(x) for x in loc if not (isinstance(x, str) and x.startswith(_LOC_TAGS)))
 
 
 class _Loader(yaml.SafeLoader):

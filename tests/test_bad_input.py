@@ -51,6 +51,8 @@ CONFIG_CASES = {
     "overlapping_split": (("split", {"estimation": [0, 300], "validation": [200, None]}), "overlap"),
     "state_named_like_function": (("model.states", ["sin", "v"]), "reserved"),
     "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
+    # the key path only: no pydantic validator tags ("dict[str,union[...]]") between the keys
+    "initial_not_a_number": (("model.initial", {"x": "foo", "v": 0.0}), "error: {cfg}: model.initial.x: expected a number"),
 }
 
 
@@ -61,7 +63,7 @@ def test_bad_config(tmp_path, capsys, case):
     _set(cfg, *path_value)
     _record().to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
-    _expect_exit2(tmp_path, capsys, expected)
+    _expect_exit2(tmp_path, capsys, expected.replace("{cfg}", str(tmp_path / "c.yaml")))
 
 
 def _expect_exit2(tmp_path, capsys, expected, config="c.yaml"):
