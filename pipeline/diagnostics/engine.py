@@ -669,13 +669,18 @@ class Diagnoser:
             g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
             dbic = bic_of(f) - bic0
             lr = lr_against(nominal, f, self.alpha)
-            ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
+            # no parameter is added (q = 0): the likelihood-ratio row only says that the weighted SSE fell;
+            # the estimation-part criterion for equal parameter counts is ΔBIC < 0, the same BIC (log det
+            # of the residual covariance) the choice is ranked by below. With several outputs the two can
+            # disagree: an alternative with ΔBIC = +0.8 was accepted, and named, on a two-output record.
+            ok = g["ci95"][0] > 0 and lr.p_value < self.alpha and dbic < 0
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
             rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
                          "reason": "accepted" if ok else "validation error not lower with 95 % confidence"
                          if g["ci95"][0] <= 0 else f"estimation fit not better by the likelihood-ratio test with "
-                         f"the effective sample size (p = {lr.p_value:.3g}; {lr.detail})",
+                         f"the effective sample size (p = {lr.p_value:.3g}; {lr.detail})" if lr.p_value >= self.alpha
+                         else f"estimation BIC not lower (ΔBIC = {dbic:+.3g}; no parameter is added)",
                          "p_family": None, "statistic": None})
             _log(f"  intersample {chosen}: gain {g['relative']:+.3f} ci {g['ci95'][0]:+.3f}..{g['ci95'][1]:+.3f}, "
                  f"dBIC {dbic:+.1f}")
