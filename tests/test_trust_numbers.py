@@ -211,3 +211,4 @@ def test_the_report_says_which_parameters_are_unidentifiable():
                                                                       "findings": [], "alpha": 0.01}}
     w = " ".join(first_screen(s)["warnings"])
     assert "a, b are not identifiable" in w and "rank 1 of 2" in w
+    assert "as 0.7 Δa − 0.7 Δb" in w and "{" not in w      # the direction as a formula, not a dict

@@ -159,10 +159,23 @@ def first_screen(s: dict) -> dict:
     for label, block in (("nominal", s.get("nominal") or {}), ("final", s.get("final") or {})):
         idf = block.get("identifiability") or {}
         if idf.get("unidentifiable"):
+            dirs = "; ".join(_direction_text(d) for d in idf.get("directions") or [])
             warnings.append(f"The {label} model's parameters {', '.join(idf['unidentifiable'])} are not identifiable "
-                            f"from these data (rank {idf.get('rank')} of {idf.get('n_params')}): moving them along "
-                            f"{idf.get('directions')} leaves the simulation unchanged; they have no standard error.")
+                            f"from these data (rank {idf.get('rank')} of {idf.get('n_params')}): changing them together as "
+                            f"{dirs or 'a combination'} (each change scaled by its sensitivity's norm) leaves the "
+                            "simulation unchanged; they have no standard error.")
     return {"lines": lines, "warnings": warnings, "verdict": verdict, "horizon": horizon}
+
+
+def _direction_text(d: dict) -> str:
+    """A null direction {name: coefficient} as "0.71 Δk2 − 0.7 Δk4"."""
+    parts = []
+    for i, (name, c) in enumerate(d.items()):
+        c = float(c)
+        mag = sig(abs(c), 2)
+        sign = ("−" if c < 0 else "") if i == 0 else (" − " if c < 0 else " + ")
+        parts.append(f"{sign}{mag} Δ{name}")
+    return "".join(parts)
 
 
 def model_rows(s: dict) -> list[dict]:
