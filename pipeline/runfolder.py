@@ -288,38 +288,7 @@ def _check_parent(target: Path, shown: str, *, default: bool) -> None:
         raise _err(shown, f"cannot create a folder in {parent}: {exc.strerror}") from None
 
 
-@contextlib.contextmanager
-def _inspect_lock(target: Path) -> Iterator[None]:
-    """Shared flock on what :func:`_publish_lock` locks, held while a target is inspected, so a check
-    never sees a concurrent publish half-way (between its two renames the target is briefly absent,
-    and a check that had just seen it would call it foreign). Best effort: where nothing can be
-    locked (a missing parent, a filesystem without flock) the check runs unlocked and
-    :func:`publish` still re-checks under the exclusive lock."""
-    fd = -1
-    for path, flags in ((target.parent, os.O_RDONLY | os.O_DIRECTORY),
-                        (target.parent / f".{target.name}.lock", os.O_RDONLY)):
-        try:
-            fd = os.open(path, flags)
-            fcntl.flock(fd, fcntl.LOCK_SH)
-            break
-        except OSError:
-            if fd >= 0:
-                os.close(fd)
-            fd = -1
-    try:
-        yield
-    finally:
-        if fd >= 0:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-
-
 def _check_existing(target: Path, shown: str) -> None:
-    with _inspect_lock(target):
-        _check_existing_unlocked(target, shown)
-
-
-def _check_existing_unlocked(target: Path, shown: str) -> None:
     try:
         st = os.lstat(target)
     except FileNotFoundError:
@@ -374,7 +343,10 @@ def check_target(target: Path | str, *, inputs: list[Path], default: bool) -> Pa
             raise _err(shown, f"contains the input {inp} (the folder of an input or an ancestor of it); "
                        "expected a separate folder for this run")
     _check_parent(resolved, shown, default=default)
-    _check_existing(resolved, shown)
+    # under a shared lock: between a concurrent publish's two renames the target is briefly absent,
+    # and a check that had just seen it would call it foreign
+    with _publish_lock(resolved, shared=True):
+        _check_existing(resolved, shown)
     return resolved
 
 
@@ -480,27 +452,32 @@ def finalize(tmp: Path, run_id: str) -> None:
 
 
 @contextlib.contextmanager
-def _publish_lock(target: Path) -> Iterator[None]:
-    """Exclusive flock serialising publishes into ``target.parent``: on the parent folder itself
-    (no file left behind) or, where folders cannot be locked (some network filesystems), on
-    ``.<name>.lock`` beside the target."""
+def _publish_lock(target: Path, *, shared: bool = False) -> Iterator[None]:
+    """flock serialising publishes into ``target.parent``: on the parent folder itself (no file left
+    behind) or, where folders cannot be locked (some network filesystems), on ``.<name>.lock`` beside
+    the target. ``shared``: the lock a check of the target takes (:func:`check_target`), so it never
+    sees a publish half-way; best effort: it creates no lock file, and where nothing can be locked the
+    check runs unlocked (:func:`publish` re-checks under its exclusive lock)."""
+    lock_file = target.parent / f".{target.name}.lock"
     fd = -1
-    try:
-        fd = os.open(target.parent, os.O_RDONLY | os.O_DIRECTORY)
-        fcntl.flock(fd, fcntl.LOCK_EX)
-    except OSError:
-        if fd >= 0:
-            os.close(fd)
+    for path, flags in ((target.parent, os.O_RDONLY | os.O_DIRECTORY),
+                        (lock_file, os.O_RDONLY if shared else os.O_RDWR | os.O_CREAT)):
         try:
-            fd = os.open(target.parent / f".{target.name}.lock", os.O_RDWR | os.O_CREAT, 0o666)
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            fd = os.open(path, flags, 0o666)
+            fcntl.flock(fd, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+            break
         except OSError as exc:
-            raise _err(target, f"cannot lock {target.parent} for publishing: {exc.strerror}") from None
+            if fd >= 0:
+                os.close(fd)
+            fd = -1
+            if path == lock_file and not shared:
+                raise _err(target, f"cannot lock {target.parent} for publishing: {exc.strerror}") from None
     try:
         yield
     finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
+        if fd >= 0:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
 
 def publish(tmp: Path, target: Path) -> Path:

@@ -676,12 +676,17 @@ class Diagnoser:
             ok = g["ci95"][0] > 0 and lr.p_value < self.alpha and dbic < 0
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
+            if ok:
+                reason = "accepted"
+            elif g["ci95"][0] <= 0:
+                reason = "validation error not lower with 95 % confidence"
+            elif lr.p_value >= self.alpha:
+                reason = (f"estimation fit not better by the likelihood-ratio test with the effective sample "
+                          f"size (p = {lr.p_value:.3g}; {lr.detail})")
+            else:
+                reason = f"estimation BIC not lower (ΔBIC = {dbic:+.3g}; no parameter is added)"
             rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
-                         "reason": "accepted" if ok else "validation error not lower with 95 % confidence"
-                         if g["ci95"][0] <= 0 else f"estimation fit not better by the likelihood-ratio test with "
-                         f"the effective sample size (p = {lr.p_value:.3g}; {lr.detail})" if lr.p_value >= self.alpha
-                         else f"estimation BIC not lower (ΔBIC = {dbic:+.3g}; no parameter is added)",
-                         "p_family": None, "statistic": None})
+                         "reason": reason, "p_family": None, "statistic": None})
             _log(f"  intersample {chosen}: gain {g['relative']:+.3f} ci {g['ci95'][0]:+.3f}..{g['ci95'][1]:+.3f}, "
                  f"dBIC {dbic:+.1f}")
             if ok and (best is None or dbic < best[2]):
