@@ -478,7 +478,11 @@ class Diagnoser:
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
-                best.p_family = max(best.p_family, fisher.p_value)
+                # the line test (family docstring): the Wald p at the periodogram's peak, Bonferroni over
+                # the n/2 frequencies it was picked from; the smaller of it and the Fisher-gated p, doubled
+                n_freq = max(1, (self.prob.split.est[1] - self.prob.split.est[0]) // 2)
+                p_line = min(1.0, best.p_family * n_freq)
+                best.p_family = min(1.0, 2.0 * min(max(best.p_family, fisher.p_value), p_line))
             if fam == "input_delay":
                 best.evidence.append(self._xcorr_lag(fit))
             ee = self._equation_error_evidence(fit, best.hyp)
