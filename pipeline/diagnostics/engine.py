@@ -82,6 +82,10 @@ class Diagnosis:
 REFIT_SHARE = 0.2     # see Diagnoser._screen
 REFIT_BUDGET_ITERATIONS = 4   # a refit still above the current error after ~4 iterations is abandoned
 COLOUR_TESTS = ("autocorrelation", "ljung_box", "fisher_g")   # residual tests of colour, not of structure
+# BIC units by which a physical cause must beat the intersample choice (which adds no parameter) to be
+# preferred: 10 is where Kass & Raftery (1995, JASA 90, §3.2) put "very strong" evidence on the 2 ln B
+# scale that a BIC difference approximates
+INTERSAMPLE_TIE_BIC = 10.0
 MAX_REFITS = 4
 
 
@@ -832,9 +836,11 @@ class Diagnoser:
             history.append(rec)
             acc = [c for c in cands if c.accepted]
             best = min(acc, key=lambda c: c.delta_bic) if acc else None
-            # the intersample choice competes with the physical causes on the same footing (ΔBIC): on a
-            # misspecified model, foh vs zoh can look better by accident; the true cause explains more
-            if inter is not None and (best is None or inter[1]["delta_bic"] < best.delta_bic):
+            # the intersample choice competes with the physical causes on ΔBIC: on a misspecified model,
+            # foh vs zoh can look better by accident; the true cause explains more. It adds no parameter,
+            # so a physical cause must beat it by INTERSAMPLE_TIE_BIC to be preferred (a wrong foh on a
+            # held input is a lag of about half a sample, which a fitted delay mimics within 1–2 BIC units)
+            if inter is not None and (best is None or inter[1]["delta_bic"] < best.delta_bic + INTERSAMPLE_TIE_BIC):
                 findings.append(inter[1])
                 current = self._accepted(inter[0])
                 fits.append(current)

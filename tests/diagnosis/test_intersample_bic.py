@@ -12,6 +12,7 @@ import contextlib
 import io
 
 import numpy as np
+import pytest
 from scipy import signal
 
 from pipeline.diagnostics import engine
@@ -58,3 +59,29 @@ def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
     row = next(r for r in hist["candidates"] if r["hypothesis"] == "foh")
     assert row["gain"]["ci95"][0] > 0 and row["delta_bic"] > 0
     assert not row["accepted"] and "BIC not lower" in row["reason"]
+
+
+# A wrong foh on a held (PRBS) input is a lag of about half a sample: a fitted input delay or a one-step
+# input lag mimics it within 1–2 BIC units at the price of a parameter. The physical cause is preferred
+# only when its BIC beats the intersample choice by engine.INTERSAMPLE_TIE_BIC (10, Kass & Raftery's
+# "very strong"). Records from the independent bench (solve_ivp on the held input, the config says foh);
+# before the margin these were named input_delay (seed 1002) and unmodeled_dynamics (seed 1008).
+@pytest.mark.parametrize("seed,magnitude", [(1002, "medium"), (1008, "small"), (1008, "medium")])
+def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, magnitude):
+    from pathlib import Path
+
+    from pipeline.bench.independent.case import make_case
+    from pipeline.config import load_config
+    from pipeline.runs import analyse
+    case = make_case("intersample", "pendulum", seed, magnitude=magnitude, noise=0.02, colour="ar0.9",
+                     input_kind="prbs", n=2000, out_dir=tmp_path)
+    assert case.truth["params"]["configured"] == "foh" and case.truth["params"]["chosen"] == "zoh"
+    with contextlib.redirect_stderr(io.StringIO()):
+        ctx = analyse(load_config(Path(case.dir) / "config.yaml"))
+    d = ctx.summary["diagnosis"]
+    first = d["findings"][0]
+    assert first["family"] == "intersample" and first["chosen"] == "zoh" and first["configured"] == "foh"
+    # the delay was refitted and accepted as well: it lost on the margin, not on its own test
+    cands = {c["hypothesis"]: c for c in ctx.diag.history[0]["candidates"]}
+    rival = [c for k, c in cands.items() if k.startswith(("input_delay", "unmodeled_dynamics")) and c.get("accepted")]
+    assert rival and all(c["delta_bic"] > first["delta_bic"] - engine.INTERSAMPLE_TIE_BIC for c in rival)
