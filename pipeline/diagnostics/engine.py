@@ -41,6 +41,7 @@ from . import stats
 from ..errors import InputError, SimulationError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
 from .families.base import Family
+from .families.periodic_disturbance import family_p_value as periodic_p_value
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
 from .hausman import NAME as HAUSMAN
@@ -482,11 +483,8 @@ class Diagnoser:
             if fam == "periodic_disturbance":
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
-                # the line test (family docstring): the Wald p at the periodogram's peak, Bonferroni over
-                # the n/2 frequencies it was picked from; the smaller of it and the Fisher-gated p, doubled
-                n_freq = max(1, (self.prob.split.est[1] - self.prob.split.est[0]) // 2)
-                p_line = min(1.0, best.p_family * n_freq)
-                best.p_family = min(1.0, 2.0 * min(max(best.p_family, fisher.p_value), p_line))
+                best.p_family = periodic_p_value(best.p_family, fisher.p_value,
+                                                 self.prob.split.est[1] - self.prob.split.est[0])
             if fam == "input_delay":
                 best.evidence.append(self._xcorr_lag(fit))
             ee = self._equation_error_evidence(fit, best.hyp)

@@ -10,14 +10,18 @@ from __future__ import annotations
 
 import contextlib
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
+from pipeline.bench.independent.case import make_case
+from pipeline.config import load_config
 from pipeline.diagnostics import engine
 from pipeline.diagnostics.engine import Diagnoser
 from pipeline.fit import fit_output_error
+from pipeline.runs import analyse
 from tests.diagnosis.first_order import problem
 
 
@@ -68,11 +72,6 @@ def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
 # before the margin these were named input_delay (seed 1002) and unmodeled_dynamics (seed 1008).
 @pytest.mark.parametrize("seed,magnitude", [(1002, "medium"), (1008, "small"), (1008, "medium")])
 def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, magnitude):
-    from pathlib import Path
-
-    from pipeline.bench.independent.case import make_case
-    from pipeline.config import load_config
-    from pipeline.runs import analyse
     case = make_case("intersample", "pendulum", seed, magnitude=magnitude, noise=0.02, colour="ar0.9",
                      input_kind="prbs", n=2000, out_dir=tmp_path)
     assert case.truth["params"]["configured"] == "foh" and case.truth["params"]["chosen"] == "zoh"

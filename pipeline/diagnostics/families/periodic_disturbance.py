@@ -5,7 +5,7 @@ Guards: the estimation window must hold at least two cycles of f (a slow drift i
 1.9e-6 Hz"), and f must not sit on an excited line of an input (a misfit of the input's own response is
 periodic wherever the input is: a periodic input makes any structural misfit periodic).
 
-The family's p-value (``engine.Diagnoser.candidates``) is the smaller of two valid tests of "no sinusoid",
+The family's p-value (:func:`family_p_value`, used by ``engine.Diagnoser.candidates``) is the smaller of two valid tests of "no sinusoid",
 doubled (Bonferroni over the two):
 
 * Fisher's g on the prewhitened residual (:func:`..stats.fisher_g`), with the added-term Wald p over the
@@ -49,6 +49,14 @@ def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
         if np.any(np.abs(order[:m] - k) <= 1):
             return True
     return False
+
+
+def family_p_value(p_wald: float, p_fisher: float, n_est: int) -> float:
+    """The family's p-value (module docstring): the smaller of the Fisher-gated p, max(p_wald, p_fisher),
+    and the line test, p_wald times the n_est/2 frequencies searched, doubled; ``p_wald`` is the
+    added-term Wald p already Bonferroni'd over the equations."""
+    p_line = min(1.0, p_wald * max(1, n_est // 2))
+    return min(1.0, 2.0 * min(max(p_wald, p_fisher), p_line))
 
 
 class PeriodicDisturbance(Family):
