@@ -88,6 +88,9 @@ COLOUR_TESTS = ("autocorrelation", "ljung_box", "fisher_g")   # residual tests o
 # scale that a BIC difference approximates
 INTERSAMPLE_TIE_BIC = 10.0
 MAX_REFITS = 4
+# the intersample stage's held-out test: one-sided, H0 "validation error not lower" (Diebold & Mariano
+# 1995) at this level (see Diagnoser._intersample)
+ONE_SIDED_LEVEL = 0.05
 
 
 def _log(msg: str) -> None:
@@ -652,7 +655,18 @@ class Diagnoser:
         """The ``intersample`` pre-stage (see :mod:`.families.intersample`). An alternative rejected
         with a clearly negative gain (95 % upper bound below 0) is not retried in later iterations,
         and a finer step that changes the current simulation by less than 0.1 % of the residual RMS
-        is not refitted (the integration is already accurate)."""
+        is not refitted (the integration is already accurate).
+
+        Acceptance: ΔBIC < 0 on the estimation part, and the validation error lower at the one-sided 5 %
+        level (``gain.p_not_lower`` < ``ONE_SIDED_LEVEL``), where a physical extension needs the two-sided 95 %
+        interval above 0, a one-sided 2.5 % test. The choice here adds no parameter: it is between two
+        models of equal size, one of which the estimation data already prefer, so the held-out test
+        checks a direction fixed beforehand (H0: gain ≤ 0) and has no flexible term's partial fit of an
+        unrelated misfit to guard against (the reason the stricter level is kept for added terms: with
+        the one-sided level for every family, x·exp(−x²) records of the independent bench got a tanh
+        and an x³ term accepted at gains whose two-sided interval contained 0; BENCHMARKS.md). Measured on
+        the independent bench (tests/diagnosis/test_intersample_one_sided.py): at 10 % noise a correct
+        switch gains about 2 % of the validation RMSE, and its two-sided interval reached just below 0."""
         fam = REGISTRY["intersample"]
         before, bic0 = gain_resid(nominal, self.prob), bic_of(nominal)
         rows, best = [], None
@@ -672,20 +686,24 @@ class Diagnoser:
                 rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
                              "reason": f"refit failed: {exc}"})
                 continue
-            g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot), before.shape[1])
+            g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot, one_sided=True),
+                        before.shape[1])
             dbic = bic_of(f) - bic0
             lr = lr_against(nominal, f, self.alpha)
             # no parameter is added (q = 0): the likelihood-ratio row only says that the weighted SSE fell;
             # the estimation-part criterion for equal parameter counts is ΔBIC < 0, the same BIC (log det
             # of the residual covariance) the choice is ranked by below. With several outputs the two can
             # disagree: an alternative with ΔBIC = +0.8 was accepted, and named, on a two-output record.
-            ok = g["ci95"][0] > 0 and lr.p_value < self.alpha and dbic < 0
+            # the held-out test is one-sided at 5 % (docstring); an extension that adds parameters needs
+            # the two-sided 95 % interval's lower end above 0
+            ok = g["p_not_lower"] < ONE_SIDED_LEVEL and lr.p_value < self.alpha and dbic < 0
             if g["ci95"][1] < 0:
                 self._intersample_dropped.add(chosen)
             if ok:
                 reason = "accepted"
-            elif g["ci95"][0] <= 0:
-                reason = "validation error not lower with 95 % confidence"
+            elif g["p_not_lower"] >= ONE_SIDED_LEVEL:
+                reason = (f"validation error not lower at the one-sided 5 % level "
+                          f"(p = {g['p_not_lower']:.3g})")
             elif lr.p_value >= self.alpha:
                 reason = (f"estimation fit not better by the likelihood-ratio test with the effective sample "
                           f"size (p = {lr.p_value:.3g}; {lr.detail})")
@@ -714,7 +732,9 @@ class Diagnoser:
                 if g.get("metric") == "validation_nrmse_sim_pooled" else "validation free-run RMSE")
         return (f"lowers the {what} from {g['before']:.4g} to {g['after']:.4g} "
                 f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
-                f"{100 * g['ci95'][1]:.1f} % on this validation input) and BIC by {-dbic:.1f}")
+                f"{100 * g['ci95'][1]:.1f} % on this validation input"
+                + (f"; one-sided p = {g['p_not_lower']:.2g} that it is not lower"
+                   if "p_not_lower" in g else "") + f") and BIC by {-dbic:.1f}")
 
     def run(self, model: Model, start: dict | None = None) -> Diagnosis:
         """The diagnosis loop (module docstring). The hypotheses' tests and refits run in threads (the

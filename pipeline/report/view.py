@@ -125,7 +125,9 @@ def first_screen(s: dict) -> dict:
         lines.append(f"Main cause: {cause}. Adding it lowers the validation RMSE by "
                      f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
                      f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
-                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} % for this validation input).")
+                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} % for this validation input"
+                     + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
+                        if g.get("p_not_lower") is not None else "") + ").")
         if len(findings) > 1:
             lines.append(f"{plural(len(findings), 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)

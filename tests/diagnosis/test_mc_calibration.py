@@ -110,6 +110,26 @@ def test_gain_interval_covers_the_gain_on_fresh_noise_with_the_same_input(phi, s
     assert cover / reps >= 0.93
 
 
+@pytest.mark.parametrize("phi", [0.0, 0.9, 0.98])
+def test_one_sided_gain_test_keeps_its_size_at_zero_gain(phi):
+    """``p_not_lower`` (the intersample stage's acceptance test, H0: gain ≤ 0) at a true gain of exactly
+    0: before and after misfit by different smooth shapes of the same RMS (0.1, half the noise sd) in
+    AR(1) φ noise, 1000 records of N = 1000. Rejections at 5 % ≤ 5 % (measured 0 %, 2.8 %, 2.5 % at
+    φ = 0, 0.9, 0.98). And it is the interval's own test: p < 0.025 exactly when the two-sided 95 %
+    interval's lower end is above 0."""
+    n, sd, reps = 1000, 0.2, 1000
+    db, da = _fixed_misfit(n, "smooth", 0.1, 7), _fixed_misfit(n, "smooth", 0.1, 8)
+    assert np.mean(db ** 2) == pytest.approx(np.mean(da ** 2), rel=1e-12)
+    rng = np.random.default_rng([21, int(100 * phi), 10])
+    rej = 0
+    for _ in range(reps):
+        e = _ar(rng, phi, n, 1000) * sd * math.sqrt(1.0 - phi * phi)
+        g = gain_ci((db + e)[:, None], (da + e)[:, None], one_sided=True)
+        assert (g["p_not_lower"] < 0.025) == (g["ci95"][0] > 0)
+        rej += g["p_not_lower"] < 0.05
+    assert rej / reps <= 0.05
+
+
 @pytest.mark.parametrize("phi, share", [(0.0, 1.0), (0.9, 1.0), (0.98, 0.8)])
 def test_gain_interval_is_informative_when_the_extension_removes_a_bursty_misfit(phi, share):
     """A saturation-shaped misfit (``burst``) of 12× the noise sd, removed by the extension (true gain
