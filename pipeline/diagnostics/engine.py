@@ -572,9 +572,12 @@ class Diagnoser:
         yh = fit.Yhat[sl, 0] - fit.Yhat[sl, 0].mean()
         n = len(y)
         kmax = max(1, min(int(round(self.max_delay / self.dt)), n // 4))
-        f = np.fft.irfft(np.fft.rfft(y, 2 * n) * np.conj(np.fft.rfft(yh, 2 * n)))
+        # zero-padded to a fast FFT length ≥ 2N (any length ≥ 2N − 1 gives the linear correlation; 2N
+        # itself can have a large prime factor: Silverbox's 180 844 = 4·29·1559)
+        m = stats._fast_len(2 * n)
+        f = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(yh, m)), m)
         lags = np.arange(-kmax, kmax + 1)
-        c = np.array([f[k] if k >= 0 else f[2 * n + k] for k in lags])
+        c = np.array([f[k] if k >= 0 else f[m + k] for k in lags])
         k = int(np.argmax(c))
         shift = 0.0
         if 0 < k < len(c) - 1:
