@@ -41,7 +41,7 @@ from . import stats
 from ..errors import InputError, SimulationError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
 from .families.base import Family
-from .families.periodic_disturbance import family_p_value as periodic_p_value
+from .families.periodic_disturbance import family_p_value as periodic_p_value, line_test_p as periodic_line_p
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
 from .hausman import NAME as HAUSMAN
@@ -484,10 +484,16 @@ class Diagnoser:
             best.p_family = min(1.0, p_min * len(hyps))
             best = self._lr_screen(fit, fam, hyps, results, best, lr_done)
             if fam == "periodic_disturbance":
+                n_est = self.prob.split.est[1] - self.prob.split.est[0]
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
-                best.p_family = periodic_p_value(best.p_family, fisher.p_value,
-                                                 self.prob.split.est[1] - self.prob.split.est[0])
+                # the line test beside Fisher's g (families.periodic_disturbance): the family's p is the
+                # smaller of the two, doubled; both rows are shown so the evidence says which decided
+                best.evidence.append({"test": "periodic_line_test", "statistic": wr.statistic,
+                                      "p_value": periodic_line_p(best.p_family, n_est),
+                                      "detail": f"added-term Wald p at the periodogram peak x {max(1, n_est // 2)} "
+                                                "Fourier frequencies searched (Bonferroni)"})
+                best.p_family = periodic_p_value(best.p_family, fisher.p_value, n_est)
             if fam == "input_delay":
                 best.evidence.append(self._xcorr_lag(fit))
             ee = self._equation_error_evidence(fit, best.hyp)

@@ -17,6 +17,8 @@ import contextlib
 import io
 from pathlib import Path
 
+import pytest
+
 from pipeline.bench.independent.case import make_case
 from pipeline.config import load_config
 from pipeline.runs import analyse
@@ -38,4 +40,10 @@ def test_periodic_disturbance_named_when_prewhitened_fisher_misses_the_line(tmp_
     # the line test, not Fisher's g, carried the decision
     assert ev["fisher_g"]["p_value"] > 0.01
     assert ev["added_term_wald"]["p_value"] * 1000 * 2 < 0.01
+    # and the finding's evidence says so: the line test's row, Bonferroni over the n_est/2 Fourier
+    # frequencies of the estimation part (1400 samples of this record: 700)
+    line = ev["periodic_line_test"]
+    assert "x 700 Fourier frequencies" in line["detail"]
+    assert line["p_value"] == pytest.approx(ev["added_term_wald"]["p_value"] * 700, rel=1e-12)
+    assert 2 * line["p_value"] < 0.01
     assert f["gain"]["ci95"][0] > 0.5

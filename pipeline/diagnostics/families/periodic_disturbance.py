@@ -51,12 +51,17 @@ def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
     return False
 
 
+def line_test_p(p_wald: float, n_est: int) -> float:
+    """The line test's p-value: the added-term Wald p at the periodogram peak (already Bonferroni'd over
+    the equations) times the n_est/2 Fourier frequencies the peak was searched among (Bonferroni)."""
+    return min(1.0, p_wald * max(1, n_est // 2))
+
+
 def family_p_value(p_wald: float, p_fisher: float, n_est: int) -> float:
     """The family's p-value (module docstring): the smaller of the Fisher-gated p, max(p_wald, p_fisher),
-    and the line test, p_wald times the n_est/2 frequencies searched, doubled; ``p_wald`` is the
-    added-term Wald p already Bonferroni'd over the equations."""
-    p_line = min(1.0, p_wald * max(1, n_est // 2))
-    return min(1.0, 2.0 * min(max(p_wald, p_fisher), p_line))
+    and the line test (:func:`line_test_p`), doubled; ``p_wald`` is the added-term Wald p already
+    Bonferroni'd over the equations."""
+    return min(1.0, 2.0 * min(max(p_wald, p_fisher), line_test_p(p_wald, n_est)))
 
 
 class PeriodicDisturbance(Family):
