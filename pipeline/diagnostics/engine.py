@@ -47,6 +47,7 @@ from .adequacy import adequacy_tests, feedback_test, material, structurally_adeq
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
 from .gain import gain_ci
+from .state_probe import NAME as PROBE_NAME, probe_hypotheses
 
 
 @dataclass
@@ -531,6 +532,29 @@ class Diagnoser:
             c.evidence.append(ee)
         return [c]
 
+    def state_probe(self, fit: FitResult) -> list[stats.TestResult]:
+        """The ``state_nonlinearity`` adequacy row (:mod:`.state_probe`): the most significant of the
+        (equation, state) probes, its p Bonferroni over them, its share of the residual as ``r2``; no row
+        when no probe can be simulated."""
+        if "static_nonlinearity" not in REGISTRY:
+            return []
+        ctx = self.context(fit, None)
+        res = []
+        for h in probe_hypotheses(ctx):
+            S = self.sensitivity(fit, h, ctx.X)
+            if S is not None:
+                res.append((h, self.statistic(fit, S)))
+        if not res:
+            return []
+        h, w = min(res, key=lambda x: x[1].p_value)
+        p = float(min(1.0, w.p_value * len(res)))
+        lo, hi = h.info["range"]
+        return [stats.TestResult(
+            PROBE_NAME, w.statistic, p, None, p >= self.alpha,
+            f"{w.dof} Gaussian bumps of {h.state} (centres {lo:.4g} to {hi:.4g}) added to the equation of "
+            f"{h.equation}, HAC Wald test beyond the current parameters, Bonferroni over {len(res)} "
+            f"equation-state pairs; they explain {100 * w.r2:.2g} % of the residual", r2=w.r2)]
+
     def _lr_refit(self, fit: FitResult, h: Hypothesis, X: np.ndarray) -> tuple:
         """(Wald result, refit) of an ``lr_screen`` hypothesis: its added-term test, and the family's refit
         started from that test's estimate."""
@@ -888,8 +912,8 @@ class Diagnoser:
         # the nominal model's adequacy (reported beside the final one) is independent of the final model's:
         # computed in a second thread meanwhile
         with ThreadPoolExecutor(max_workers=1) as side:
-            job = side.submit(adequacy_tests, nominal, prob, self.alpha)
-            adequacy = adequacy_tests(current, prob, self.alpha)
+            job = side.submit(lambda: adequacy_tests(nominal, prob, self.alpha) + self.state_probe(nominal))
+            adequacy = adequacy_tests(current, prob, self.alpha) + self.state_probe(current)
             nominal_adequacy = job.result()
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
