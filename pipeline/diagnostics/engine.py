@@ -541,9 +541,12 @@ class Diagnoser:
         ctx = self.context(fit, None)
         res = []
         for h in probe_hypotheses(ctx):
-            S = self.sensitivity(fit, h, ctx.X)
-            if S is not None:
-                res.append((h, self.statistic(fit, S)))
+            # one bump per simulation: the other bumps' terms at their null add exactly 0, so the columns are
+            # those of the joint hypothesis, at a fifth of the interpreted terms per simulation
+            cols = [self.sensitivity(fit, replace(h, key=f"{h.key}:{i}", terms=[t], coefs=[c]), ctx.X)
+                    for i, (t, c) in enumerate(zip(h.terms, h.coefs))]
+            if all(S is not None for S in cols):
+                res.append((h, self.statistic(fit, np.column_stack(cols))))
         if not res:
             return []
         h, w = min(res, key=lambda x: x[1].p_value)
