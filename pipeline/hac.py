@@ -160,7 +160,8 @@ def ewc(v: np.ndarray, dof: int) -> np.ndarray:
     the per-sample long-run covariance from any stretch of a stationary series, and N times it is the
     sum scale of all N rows. A DCT of a length with a large prime factor runs by Bluestein's algorithm,
     10–15× slower: on Silverbox every added-term test's scores have such a length (N − p − 1 after an
-    AR(p) filter and the prewhitening), 16–26 ms of its ~45 ms. Shorter series use every row, as before."""
+    AR(p) filter and the prewhitening): 7.5–9.4 ms per transform against 0.65 ms at the fast length, on
+    a test of about 36–40 ms. Shorter series use every row, as before."""
     n = v.shape[0]
     lam = cosine_transform(_fast_rows(v), dof)                                                      # (B, q)
     return n * (lam.T @ lam) / dof

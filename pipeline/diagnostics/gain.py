@@ -44,18 +44,10 @@ CI_MEANING = ("for this validation input: the interval is the sampling uncertain
               "different gain")
 
 
-def _conditional_interval(b2: np.ndarray, a2: np.ndarray, da: np.ndarray,
-                          level: float = 0.95) -> tuple[float, float, float]:
-    """Interval of L = ½ ln(m_b/m_a) given the input (module docstring), and the ν used, from the
-    per-sample mean squares b_t², a_t² and products δ_t a_t (each averaged over outputs)."""
-    L, se, dof = _log_ratio(b2, a2, da)
-    t = float(sps.t.ppf(0.5 + level / 2, dof))
-    return L - t * se, L + t * se, dof
-
-
 def _log_ratio(b2: np.ndarray, a2: np.ndarray, da: np.ndarray) -> tuple[float, float, float]:
     """L̂ = ½ ln(m_b/m_a), its standard error given the input and the ν of its Student law (module
-    docstring)."""
+    docstring), from the per-sample mean squares b_t², a_t² and products δ_t a_t (each averaged over
+    outputs). The 95 % interval is L̂ ± t_{ν, 0.975} se."""
     ma, mb = float(np.mean(a2)), float(np.mean(b2))
     L = 0.5 * math.log(mb / ma)
     h = 0.5 * ((a2 - ma) * (1.0 / mb - 1.0 / ma) + 2.0 * (da - np.mean(da)) / mb)
@@ -95,8 +87,10 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
                 "bootstrap": {"method": "none (degenerate residuals)", "block": None, "n": len(b2)}}
     # δ_t = b_t − a_t = ŷ_a − ŷ_b: fixed given the input and the fitted models
     da = np.mean((b - a) * a, axis=1)
-    lo, hi, dof = _conditional_interval(b2, a2, da)
-    extra = {"p_not_lower": p_not_lower(*_log_ratio(b2, a2, da))} if one_sided else {}
+    L, se, dof = _log_ratio(b2, a2, da)
+    t = float(sps.t.ppf(0.975, dof))
+    lo, hi = L - t * se, L + t * se
+    extra = {"p_not_lower": p_not_lower(L, se, dof)} if one_sided else {}
     # L is clipped to ±ln 100: a bound at an RMSE ratio of 100 (relative gain −99 or 0.99) says that this
     # record cannot bound the gain on that side (the residuals are too smooth: few degrees of freedom)
     lo, hi = max(lo, -L_CLIP), min(hi, L_CLIP)
