@@ -163,6 +163,10 @@ def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
           if c["family"] == "static_nonlinearity" and "sqrt(" in c["hypothesis"]]
     assert sq and all("Holm" not in c["reason"] and c.get("gain") for c in sq)
     assert min(c["gain"]["after"] for c in sq) < 0.75 < s["nominal"]["validation"]["rmse_sim"]
+    # and the reason says that the record cannot bound the gain, not that the gain is near 0
+    for c in sq:
+        assert c["gain"]["ci95"][0] <= -99 and "unbounded below" in c["reason"]
+        assert f"{100 * c['gain']['relative']:+.1f} %" in c["reason"]
 
 
 @pytest.mark.realdata

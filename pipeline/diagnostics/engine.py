@@ -47,7 +47,7 @@ from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
-from .gain import gain_ci
+from .gain import gain_ci, unbounded_note
 from .state_probe import NAME as PROBE_NAME, probe_hypotheses
 
 
@@ -769,7 +769,7 @@ class Diagnoser:
                 reason = "accepted"
             elif g["p_not_lower"] >= ONE_SIDED_LEVEL:
                 reason = (f"validation error not lower at the one-sided 5 % level "
-                          f"(p = {g['p_not_lower']:.3g})")
+                          f"(p = {g['p_not_lower']:.3g})" + unbounded_note(g))
             elif lr.p_value >= self.alpha:
                 reason = (f"estimation fit not better by the likelihood-ratio test with the effective sample "
                           f"size (p = {lr.p_value:.3g}; {lr.detail})")
@@ -904,7 +904,7 @@ class Diagnoser:
                 lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
                 c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
-                    "validation error not lower with 95 % confidence" if c.gain["ci95"][0] <= 0
+                    "validation error not lower with 95 % confidence" + unbounded_note(c.gain) if c.gain["ci95"][0] <= 0
                     else f"estimation fit not better by the likelihood-ratio test with the effective sample size "
                          f"(p = {lr.p_value:.3g}; {lr.detail})")
                 _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
