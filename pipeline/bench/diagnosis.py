@@ -59,7 +59,6 @@ TUNE_SEEDS = (0, 1, 2)
 TEST_SEEDS = (1000, 1001, 1002)
 HOLDOUT_SEEDS = (3000, 3001, 3002)
 SEED_SETS = {"tune": TUNE_SEEDS, "test": TEST_SEEDS, "holdout": HOLDOUT_SEEDS}
-SEED_WORDS = {"tune": "tuning seeds", "test": "test seeds", "holdout": "holdout seeds"}
 NOISE_LEVELS = (0.02, 0.10)
 INPUT_CYCLE = ("band", "held", "prbs")
 COLOUR_CYCLE = ("white", "white", "ar0.5", "white", "ar0.9")
@@ -421,10 +420,16 @@ def render(results: list[dict], meta: dict) -> str:
           "input and fresh noise it should cover; with a fresh input the gain itself changes (other "
           "amplitudes and frequencies excite the effect differently), which one record cannot measure. Inputs that make a "
           "family unidentifiable are not generated (saturation, dead zone and backlash of a two-level PRBS are "
-          "a gain change). Seeds: " + SEED_WORDS[meta.get("seeds_name", "tune")] + " for this table; tuning seeds "
-          "(0, 1, 2) are what the detector may be tuned on, test seeds (1000–1002) are the tests' (issues 8 and 9), "
-          "holdout seeds (3000–3002) are run to report only.", "", END]
+          "a gain change). Seeds: " + _seed_words(meta["seeds_name"]), "", END]
     return "\n".join(L) + "\n"
+
+
+def _seed_words(name: str) -> str:
+    """The footer's sentence on seeds: which set made this table, and what each set is for."""
+    roles = {"tune": "what the detector may be tuned on", "test": "the tests' (issues 8 and 9)",
+             "holdout": "run to report only"}
+    sets = "; ".join(f"{k} {list(v)}: {roles[k]}" for k, v in SEED_SETS.items())
+    return f"{name} seeds {list(SEED_SETS[name])} for this table ({sets})."
 
 
 def write_section(path: Path, section: str) -> None:
