@@ -21,8 +21,9 @@ Adequacy tests on the estimation residual of every output against every input (e
   mode leaves input dynamics at lags far beyond the first two tests' 25 and 15.
 
 The engine adds ``state_nonlinearity`` (:mod:`.state_probe`: Gaussian bumps of each state, tested
-with the hypotheses' sensitivity machinery) and ``structural_wald`` (the families' added-term tests on
-the final model) to these rows. A model that fails them has a structural error; when no family's extension removes it the verdict is
+with the hypotheses' sensitivity machinery), ``structural_wald`` (the families' added-term tests on
+the final model) and, when the loop needed two static forms of one state in one equation,
+``nonlinearity_form`` (:mod:`.form`) to these rows. A model that fails them has a structural error; when no family's extension removes it the verdict is
 ``unexplained_discrepancy`` (contract §3), never "no discrepancy", and the noise families are not tested
 (an AR noise model beats white noise on any misfit). :func:`where_it_fails` says where: the lags and
 frequencies of the residual–input dependence, the amplitude range and the time window with the

@@ -45,6 +45,7 @@ from .families.base import Family
 from .families.periodic_disturbance import family_p_value as periodic_p_value, line_test_p as periodic_line_p
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
+from .form import Accepted, form_test
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
 from .gain import gain_ci, unbounded_note
@@ -65,6 +66,7 @@ class Candidate:
     start: dict = field(default_factory=dict)
     runner_up: bool = False      # a family's near-tie second hypothesis (Diagnoser._near_tie)
     places: int = 1              # distinct places the family's hypotheses act on (Diagnoser._where)
+    lr: stats.TestResult | None = None   # the likelihood-ratio test of the refit against the current model
 
     @property
     def prior_penalty(self) -> float:
@@ -875,6 +877,7 @@ class Diagnoser:
 
         tests0, f_cyc0 = tests_of(nominal)
         findings, history, fits = [], [], [nominal]
+        steps: list[Accepted] = []                         # the accepted extensions, for the form test
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
         last_r2: dict[str, float] = {}
@@ -911,7 +914,7 @@ class Diagnoser:
                     continue
                 c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
                 c.delta_bic = bic_of(c.fit, len(c.hyp.searched)) - bic0
-                lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
+                lr = c.lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
                 c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
                 c.reason = "accepted" if c.accepted else (
                     "validation error not lower with 95 % confidence" + unbounded_note(c.gain) if c.gain["ci95"][0] <= 0
@@ -944,6 +947,8 @@ class Diagnoser:
             if best is None:
                 break
             findings.append(self.finding(best, [c for c in acc if c is not best]))
+            steps.append(Accepted(best.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
+                                  best.lr.p_value, best.lr.statistic, current.sse_w, best.fit.sse_w))
             current = self._accepted(best.fit)
             fits.append(current)
             last_p = None
@@ -970,6 +975,9 @@ class Diagnoser:
                 ("significant added-term tests, no accepted extension: " + ", ".join(
                     f"{k} ({100 * last_r2.get(k, 0.0):.2g} % of the residual)" for k in sig)) if sig else
                 "no family's added-term test is significant after Holm correction", r2=r2))
+        form = form_test(steps)
+        if form is not None:
+            adequacy.append(form)
         structural_ok = structurally_adequate(adequacy)
         noise_tests = []
         noise_fams = [f for f in self.families if f in NOISE_FAMILY_IDS]
