@@ -11,6 +11,7 @@ from pipeline.errors import ConfigError
 def test_tuning_and_test_seeds_are_disjoint_and_the_grid_covers_every_kind():
     assert not set(bd.TUNE_SEEDS) & set(bd.TEST_SEEDS)
     assert not (set(bd.TUNE_SEEDS) | set(bd.TEST_SEEDS)) & set(bd.HOLDOUT_SEEDS)
+    assert not (set(bd.TUNE_SEEDS) | set(bd.TEST_SEEDS) | set(bd.HOLDOUT_SEEDS)) & set(bd.HOLDOUT2_SEEDS)
     g = bd.grid(bd.TUNE_SEEDS)
     fams = {f for f, v in menu()["families"].items()}
     assert {s.family for s in g} == fams
