@@ -56,6 +56,7 @@ import numpy as np
 
 from .independent import MAGNITUDES, OUT_OF_VOCABULARY, SUPPORTED, make_case, menu
 from .independent.effects import identifiable
+from .independent.systems import BASES
 
 TUNE_SEEDS = (0, 1, 2)
 TEST_SEEDS = (1000, 1001, 1002)
@@ -460,6 +461,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=None, help="first N records of the grid only")
     ap.add_argument("--only", default=None, help="comma-separated true families (or none, backlash, ...) only")
     ap.add_argument("--noise", type=float, default=None, help="one noise level of the grid only (0.02 or 0.1)")
+    ap.add_argument("--bases", default=None, help="comma-separated base systems only (e.g. twomode, the slowest)")
     ap.add_argument("--no-coverage", action="store_true",
                     help="skip the fresh-record coverage check (for iterating on top-1; not for the published table)")
     a = ap.parse_args(argv)
@@ -472,13 +474,19 @@ def main(argv=None) -> int:
         if unknown:
             ap.error(f"--only: unknown {', '.join(unknown)}; expected some of {', '.join(known)}")
         specs = [s for s in specs if s.family in a.only.split(",")]
+    if a.bases:
+        unknown = [b for b in a.bases.split(",") if b not in BASES]
+        if unknown:
+            ap.error(f"--bases: unknown {', '.join(unknown)}; expected some of {', '.join(BASES)}")
+        specs = [s for s in specs if s.base in a.bases.split(",")]
     if a.noise is not None:
         if a.noise not in NOISE_LEVELS:
             ap.error(f"--noise: {a.noise:g} is not a level of the grid; expected one of "
                      f"{', '.join(f'{x:g}' for x in NOISE_LEVELS)}")
         specs = [s for s in specs if s.noise == a.noise]
     specs = specs[: a.limit]
-    partial_args = ([f"--only {a.only}"] if a.only else []) + ([f"--noise {a.noise:g}"] if a.noise is not None else []) \
+    partial_args = ([f"--only {a.only}"] if a.only else []) + ([f"--bases {a.bases}"] if a.bases else []) \
+        + ([f"--noise {a.noise:g}"] if a.noise is not None else []) \
         + ([f"--limit {a.limit}"] if a.limit else []) + (["--no-coverage"] if a.no_coverage else [])
     partial = bool(partial_args)
     for opt, path in (("--json", a.json), ("--out", a.out)):

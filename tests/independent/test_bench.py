@@ -1,5 +1,7 @@
 """The diagnosis bench's grid and scoring (pipeline.bench.diagnosis)."""
 
+import json
+
 import pytest
 
 from pipeline.bench import diagnosis as bd
@@ -103,6 +105,7 @@ def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeyp
 
 @pytest.mark.parametrize("args, says", [(["--only", "offset,frobnication"], "--only: unknown frobnication"),
                                         (["--noise", "0.05"], "--noise: 0.05 is not a level of the grid"),
+                                        (["--bases", "msd,rocket"], "--bases: unknown rocket"),
                                         (["--json", "/no/such/folder/r.json"], "--json: the folder of")])
 def test_bad_bench_options_stop_before_any_record_with_exit_2(args, says, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -117,12 +120,14 @@ def test_a_partial_run_leaves_benchmarks_md_alone_unless_asked(tmp_path, monkeyp
     explicit --out (the published section of BENCHMARKS.md is the full grid's)."""
     monkeypatch.chdir(tmp_path)
     (tmp_path / "BENCHMARKS.md").write_text("# Benchmarks\n")
-    part = ["--only", "none", "--noise", "0.02", "--limit", "1", "--no-coverage", "--workers", "1", "--n", "600"]
+    part = ["--only", "none", "--bases", "tank", "--noise", "0.02", "--limit", "1", "--no-coverage", "--workers", "1",
+            "--n", "600", "--json", "part.json"]
     assert bd.main(part) == 0
     assert (tmp_path / "BENCHMARKS.md").read_text() == "# Benchmarks\n"
     assert bd.main(part + ["--out", "part.md"]) == 0
     text = (tmp_path / "part.md").read_text()
-    assert "(partial: --only none --noise 0.02 --limit 1 --no-coverage)" in text and "1 records" in text
+    assert "(partial: --only none --bases tank --noise 0.02 --limit 1 --no-coverage)" in text and "1 records" in text
+    assert [r["spec"]["base"] for r in json.loads((tmp_path / "part.json").read_text())["records"]] == ["tank"]
 
 
 def test_backlash_of_a_two_level_prbs_is_a_gain_change_so_it_is_not_generated():
