@@ -1,7 +1,8 @@
 """What the report says in words, computed from ``summary.json`` content (so it also works on the
 keys the diagnosis contract adds later, and tolerates their absence on old runs):
 
-* the first screen: how much of the validation output the simulation misses, the main cause, its gain
+* the first screen: how much of the validation output the simulation misses, the main cause (with an
+  "unexplained" verdict: the largest partial finding), its gain
   with interval, and a plain warning when a model is unusable (negative fit) or the verdict is
   "unexplained";
 * one recommendation reconciling the diagnosis loop's model with the structure stage's CV winner;
@@ -122,14 +123,16 @@ def first_screen(s: dict) -> dict:
         term = f0.get("term")
         cause = f"{f0.get('family')}" + (f" in the equation of {where}" if f0.get("equation") else
                                          (f" on output {where}" if where else "")) + (f" ({term})" if term else "")
-        lines.append(f"Main cause: {cause}. Adding it lowers the validation RMSE by "
+        partial = verdict == "unexplained_discrepancy"
+        # with the verdict unexplained the findings explain part of the misfit only: not "the cause"
+        lines.append(f"{'Largest partial finding' if partial else 'Main cause'}: {cause}. Adding it lowers the validation RMSE by "
                      f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
                      f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
                      f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} % for this validation input"
                      + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
                         if g.get("p_not_lower") is not None else "") + ").")
         if len(findings) > 1:
-            lines.append(f"{plural(len(findings), 'cause')} found in all: "
+            lines.append(f"{plural(len(findings), 'partial finding' if partial else 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)
                          + f"; with all of them the fit is {sig(fin.get('fit_percent'), 3)} % "
                            f"(RMSE {sig(fin.get('rmse_sim'))}).")

@@ -108,6 +108,10 @@ def test_negative_fit_and_unexplained_verdict_are_warned_plainly():
     assert "nominal model is unusable" in fs["warnings"][0]
     fs = view.first_screen(_summary(50.0, 60.0, verdict="unexplained_discrepancy"))
     assert any("unexplained" in w for w in fs["warnings"])
+    # the findings of an unexplained verdict explain part of the misfit: not called "the main cause"
+    text = " ".join(fs["lines"])
+    assert "Largest partial finding: cubic_stiffness" in text and "Main cause" not in text
+    assert "Main cause: cubic_stiffness" in " ".join(view.first_screen(_summary(50.0, 60.0))["lines"])
 
 
 def test_recommendation_reconciles_diagnosis_model_and_cv_winner():
