@@ -24,15 +24,14 @@ as every other row.
 
 from __future__ import annotations
 
-import re
+import ast
 from dataclasses import dataclass
 
+from ..expressions import CONSTANTS, FUNCTIONS, parse_eval
 from . import stats
 
 STATIC_FORMS = ("static_nonlinearity", "cubic_stiffness", "quadratic_damping", "coulomb_friction")
 LIBRARY = "static_nonlinearity"
-_FUNCTIONS = {"tanh", "abs", "sign", "sqrt", "exp", "log", "sin", "cos", "tan", "arctan", "sinh", "cosh",
-              "maximum", "minimum", "clip", "step", "pi"}
 
 
 @dataclass(frozen=True)
@@ -49,23 +48,36 @@ class Accepted:
 
 
 def variables(term: str | None) -> tuple[str, ...]:
-    """The names a term's expression uses, functions and constants left out (e.g. tanh(x/0.6) → (x,))."""
-    return tuple(sorted(set(re.findall(r"[A-Za-z_]\w*", term or "")) - _FUNCTIONS))
+    """The names a term's expression uses, the whitelisted functions and constants left out (e.g.
+    tanh(x/0.6) → (x,)); read from the expression's own syntax tree, so 1e-05 is a number, not a name."""
+    if not term:
+        return ()
+    try:
+        tree = parse_eval(term)
+    except SyntaxError:
+        return ()
+    names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+    return tuple(sorted(names - set(FUNCTIONS) - set(CONSTANTS)))
+
+
+def _share(group: list[Accepted]) -> float:
+    """The share of the residual sum of squares the group's later terms removed."""
+    return 1.0 - group[-1].sse_after / group[1].sse_before
 
 
 def form_test(accepted: list[Accepted]) -> stats.TestResult | None:
     """The ``nonlinearity_form`` row, or None when no state has two static forms in one equation."""
     groups: dict[tuple, list[Accepted]] = {}
     for a in accepted:
-        v = variables(a.term)
-        if a.family in STATIC_FORMS and len(v) == 1:
+        v = variables(a.term) if a.family in STATIC_FORMS else ()
+        if len(v) == 1:
             groups.setdefault((a.equation, v[0]), []).append(a)
     hits = [(k, g) for k, g in groups.items() if len(g) >= 2 and any(a.family == LIBRARY for a in g)]
     if not hits:
         return None
     # the group whose later terms removed the largest share of the residual
-    (eq, var), g = max(hits, key=lambda kg: 1.0 - kg[1][-1].sse_after / kg[1][1].sse_before)
-    r2 = 1.0 - g[-1].sse_after / g[1].sse_before
+    (eq, var), g = max(hits, key=lambda kg: _share(kg[1]))
+    r2 = _share(g)
     terms = " + ".join(a.term for a in g)
     return stats.TestResult(
         "nonlinearity_form", float(g[1].lr_statistic), float(g[1].lr_p), None, False,

@@ -99,3 +99,10 @@ def test_a_hidden_cubic_stiffness_is_still_a_named_cause(tmp_path):
     assert d["findings"][0]["family"] == "cubic_stiffness"
     assert d["verdict"] == "discrepancy"
     assert not any("nonlinearity_form" in t for t in (d.get("unexplained") or {}).get("failed_tests", []))
+
+
+def test_variables_read_numbers_in_exponent_notation_as_numbers():
+    # a regex over the text took the "e" of 1e-05 for a second state, so tanh(x/1e-05) then x³ got no row
+    assert variables("tanh(x/1e-05)") == ("x",)
+    row = form_test([_a("static_nonlinearity", "tanh(x/1e-05)"), _a("cubic_stiffness", "x**3")])
+    assert row is not None and not row.passed
