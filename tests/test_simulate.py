@@ -91,6 +91,30 @@ def test_compiled_terms_simulate_bit_for_bit_like_interpreted_ones():
         assert np.array_equal(a, b)
 
 
+def test_kernel_lookup_by_structure_never_returns_another_structures_kernel():
+    """get_kernel is looked up by the model's structure (names, equations, terms), not by its source:
+    models with the same names and parameter values but other equations, or other compiled terms,
+    must each run their own kernel. Each is checked against its closed form or its interpreted form,
+    after the other one has been simulated (so a stale lookup would return the wrong kernel)."""
+    t = np.arange(201) * 0.01
+    U = np.zeros((len(t), 1))
+    decay = _model({"x": "-a*x + u"}, {"a": 1.5}, ["x"])
+    grow = _model({"x": "a*x + u"}, {"a": 1.5}, ["x"])
+    for m, sign in ((decay, -1), (grow, 1), (decay, -1)):
+        x = simulate_states(m.with_params({"a": 1.5}), t, U, np.ones(1)).X[:, 0]
+        np.testing.assert_allclose(x, np.exp(sign * 1.5 * t), rtol=1e-8)
+    base = _model({"x": "v", "v": "u - 0.5*v - 4*x"}, {}, ["x", "v"])
+    U = np.sin(1.3 * t)[:, None]
+    cubes = base.extend([Term("cubic_stiffness", "pow", "v", "a", var="x", power=3)], {"a": -2.0})
+    squares = base.extend([Term("static_nonlinearity", "pow", "v", "a", var="x", power=2)], {"a": -2.0})
+    outs = []
+    for m in (cubes, squares, cubes):
+        a = simulate_states(m.compiled(), t, U, np.full(2, 0.5)).X
+        np.testing.assert_array_equal(a, simulate_states(m, t, U, np.full(2, 0.5)).X)
+        outs.append(a)
+    assert np.max(np.abs(outs[0] - outs[1])) > 1e-3      # the two structures do differ here
+
+
 def test_divergence_is_caught_not_hung():
     """x' = x², x(0) = 1 blows up at t = 1."""
     m = _model({"x": "x*x + 0*u"}, {}, ["x"])
