@@ -335,7 +335,7 @@ def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None
 def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | None = None,
                      max_nfev: int = 200, loss="linear", f_scale: float = 1.0,
                      sample_weights: np.ndarray | None = None, abandon_above: float | None = None,
-                     abandon_after: int = 0) -> FitResult:
+                     abandon_after: int = 0, ftol: float = 1e-8) -> FitResult:
     """Output-error fit of ``model.free`` (and initial states marked "estimate").
 
     ``abandon_above``: raise :class:`RefitAbandoned` once ``abandon_after`` simulations (Jacobian
@@ -429,7 +429,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         par = ({"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1
                and steps >= JACOBIAN_THREADS_MIN_STEPS else {})
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
-                            f_scale=f_scale, **par)
+                            f_scale=f_scale, ftol=ftol, **par)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)
         if loss != "linear":
             # scipy's jac is loss-modified; the covariance needs the plain residual's Jacobian at θ̂

@@ -7,7 +7,8 @@ full test (``Diagnoser.screened_out``), and each sensitivity is simulated from t
 (``Hypothesis.acts_from``). Estimate: a refit of Δ and the free parameters at every grid time, the one
 with the lowest SSE (the least-squares break date, Bai 1997, Econometric Theory 13(3); the added-term
 test's time is linearised at Δ = 0 and can be far from a large jump), then a golden-section search on
-t_j between its neighbours, t_j fixed in the final refit and counted as an estimated parameter
+t_j between its neighbours (the grid refits converged to ``GRID_FTOL``, enough to rank the dates; the
+search and the final refit to least_squares' default), t_j fixed in the final refit and counted as an estimated parameter
 (``Hypothesis.searched``) in ΔBIC and the likelihood-ratio test."""
 
 import numpy as np
@@ -18,6 +19,11 @@ from .base import Context, Family, Hypothesis, pname
 
 GRID = 16
 SEARCH_STEPS = 7
+# the grid refits only rank the break dates: their SSE is converged to a relative GRID_FTOL, and to half
+# a BIC unit on long records (ΔBIC ≈ N·ΔSSE/SSE), whichever is finer; the golden-section refits and the
+# final refit use least_squares' default 1e-8
+GRID_FTOL = 1e-4
+GRID_FTOL_BIC = 0.5
 
 
 class ParameterJump(Family):
@@ -48,10 +54,11 @@ class ParameterJump(Family):
         step = hyp.info["grid_step"]
         d0 = float(cand.wald.beta[0])
 
-        def refit(tj):
+        def refit(tj, ftol=1e-8):
             h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
             try:
-                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, start=estimated_x0(fit), max_nfev=60)
+                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, start=estimated_x0(fit), max_nfev=60,
+                                        ftol=ftol)
             except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
                 from ...errors import InputError
                 if isinstance(exc, InputError):
@@ -62,7 +69,9 @@ class ParameterJump(Family):
         # from it (0.5 -> 0.9 at 72 s on a tank: tested at 33 s). Refit at every grid time and keep the
         # lowest SSE: the least-squares break date (Bai 1997), then refine between its neighbours
         near = list(hyp.info.get("grid", [hyp.extra_params[tj_name]]))
-        fits = [refit(tj) for tj in near]
+        e0, e1 = dg.prob.split.est
+        ftol = min(GRID_FTOL, GRID_FTOL_BIC / ((e1 - e0) * dg.prob.Y.shape[1]))
+        fits = [refit(tj, ftol) for tj in near]
         k = int(np.argmin([np.inf if f is None else f.sse_w for f in fits]))
         t0 = near[k]
         a, b = t0 - step, t0 + step
