@@ -437,6 +437,7 @@ class Diagnoser:
                 tried.add(key)
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
+                m = self._compiled_if_long(m)
                 # abandoned if still above the current model's error after about four iterations
                 f = fit_output_error(m, self.prob, start=estimated_x0(fit), abandon_above=fit.sse_w * (1 + 1e-9),
                                      abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
@@ -826,6 +827,13 @@ class Diagnoser:
 
     # simulated steps (samples x substeps) from which an accepted model gets its own compiled kernel
     COMPILE_MIN_STEPS = 200_000
+
+    def _compiled_if_long(self, m: Model) -> Model:
+        """A refit's model with its additive terms compiled (as :meth:`_accepted` does, and from the same
+        length): a refit runs 20–150 simulations of one structure, so on a long record it pays the
+        compile as an accepted model does. Bit-identical to the interpreted model
+        (tests/test_simulate.py), so no number changes."""
+        return m.compiled() if len(self.prob.t) * m.substeps >= self.COMPILE_MIN_STEPS else m
 
     def _accepted(self, fit: FitResult) -> FitResult:
         """The accepted fit, whose model every later hypothesis extends: on a long record its extension
