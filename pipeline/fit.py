@@ -348,7 +348,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     ``loss``/``f_scale`` are passed to ``least_squares`` (a robust ρ, e.g. a Student-t negative
     log-likelihood as a callable of z = r²); ``sample_weights`` (n_est,) multiply each estimation
     sample's residual (weighted LS, e.g. 1/σ_k for a variance model); (n_est, ny) weight each output's
-    sample separately."""
+    sample separately. ``ftol``: least_squares' relative cost tolerance (its default 1e-8; a looser one
+    where the fit only ranks alternatives, e.g. the jump family's grid of break dates)."""
     est = prob.split.est
     stop = est[1]
     w = prob.weights

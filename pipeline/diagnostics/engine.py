@@ -842,10 +842,8 @@ class Diagnoser:
         nominal right-hand side (Silverbox with three accepted terms: 45 ms per simulation interpreted,
         9 ms compiled); a compile costs a few seconds once per structure and machine (cached on disk),
         which pays off from about this many simulated steps per simulation."""
-        m = fit.model
-        if len(self.prob.t) * m.substeps < self.COMPILE_MIN_STEPS:
-            return fit
-        return replace(fit, model=m.compiled())
+        m = self._compiled_if_long(fit.model)
+        return fit if m is fit.model else replace(fit, model=m)
 
     def _fit_nominal(self, model: Model, start: dict | None) -> FitResult:
         """The nominal output-error fit from the equation-error ``start`` and, when there is one, also

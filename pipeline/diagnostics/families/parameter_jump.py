@@ -54,11 +54,11 @@ class ParameterJump(Family):
         step = hyp.info["grid_step"]
         d0 = float(cand.wald.beta[0])
 
-        def refit(tj, ftol=1e-8):
+        def refit(tj, **fit_kw):
             h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
             try:
                 return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, start=estimated_x0(fit), max_nfev=60,
-                                        ftol=ftol)
+                                        **fit_kw)
             except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
                 from ...errors import InputError
                 if isinstance(exc, InputError):
@@ -71,7 +71,7 @@ class ParameterJump(Family):
         near = list(hyp.info.get("grid", [hyp.extra_params[tj_name]]))
         e0, e1 = dg.prob.split.est
         ftol = min(GRID_FTOL, GRID_FTOL_BIC / ((e1 - e0) * dg.prob.Y.shape[1]))
-        fits = [refit(tj, ftol) for tj in near]
+        fits = [refit(tj, ftol=ftol) for tj in near]
         k = int(np.argmin([np.inf if f is None else f.sse_w for f in fits]))
         t0 = near[k]
         a, b = t0 - step, t0 + step
