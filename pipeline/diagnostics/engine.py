@@ -274,14 +274,20 @@ class Diagnoser:
         self._states_cache = (fit, out)
         return out
 
-    def _sim_est_from(self, model: Model, fit: FitResult, t_from: float) -> np.ndarray | None:
+    def _sim_est_from(self, model: Model, fit: FitResult, t_from: float,
+                      after: Model | None = None) -> np.ndarray | None:
         """The estimation-part outputs of ``model``, which equals ``fit.model`` before ``t_from``:
         the fit's own simulated rows up to there, and from ``RESUME_BACK`` samples before the last
         sample at or before ``t_from`` a simulation resumed from the fit's simulated state. The kernel
         is a one-step recursion in the stored state, so this equals the full simulation (up to the
         rounding of ``step(t − t_j)`` being 0 before t_j); it costs the part after t_j only (a jump's
         test, half a simulation on average). Falls back to the full simulation when the estimation
-        part spans several segments or the model has an input delay (whose shifted input looks back)."""
+        part spans several segments or the model has an input delay (whose shifted input looks back).
+
+        ``after`` (:meth:`Family.settled`): a model equal to ``model`` at every time after ``t_from``
+        without its programs; ``model`` is then simulated only up to the end of the sample interval
+        holding ``t_from`` and ``after`` (the current model's kernel, compiled on long records: about
+        a third of the interpreting kernel's time) from there, its states given to ``model``'s outputs."""
         prob = self.prob
         e0, e1 = prob.split.est
         st = self._current_states(fit)
@@ -293,9 +299,20 @@ class Diagnoser:
         if k <= e0:
             return self._sim_est(model, self._x0_for(fit, model))
         k = min(k, e1 - 1)
-        res = simulate_states(model, prob.t[k:e1], prob.U[k:e1], X[k - s0], bound=prob.bound)
-        if res.diverged_at is not None:
-            return None
+        # every stage time of the intervals from sample j on is at or after t[j] > t_from
+        j = k + self.RESUME_BACK + 1
+        if after is not None and j < e1 - 1:
+            res = simulate_states(model, prob.t[k:j + 1], prob.U[k:j + 1], X[k - s0], bound=prob.bound)
+            if res.diverged_at is not None:
+                return None
+            rest = simulate_states(after, prob.t[j:e1], prob.U[j:e1], res.X[-1], bound=prob.bound)
+            if rest.diverged_at is not None:
+                return None
+            res = replace(res, X=np.concatenate([res.X[:-1], rest.X]))
+        else:
+            res = simulate_states(model, prob.t[k:e1], prob.U[k:e1], X[k - s0], bound=prob.bound)
+            if res.diverged_at is not None:
+                return None
         Y = np.array(fit.Yhat[e0:e1], dtype=float, copy=True)
         Y[k - e0:] = outputs(model, prob.t[k:e1], prob.U[k:e1], res.X, prob.out_names)
         return Y
@@ -377,7 +394,11 @@ class Diagnoser:
             h = self._step(fit, hyp, c, X)
             null = float(hyp.null.get(c, 0.0))
             mh = self.hyp_model(fit, hyp, {c: null + h})
-            Yh = self._sim_est_from(mh, fit, hyp.acts_from) if resume else self._sim_est(mh, x0)
+            if resume:
+                after = REGISTRY[hyp.family].settled(fit.model, hyp, {c: null + h})
+                Yh = self._sim_est_from(mh, fit, hyp.acts_from, after)
+            else:
+                Yh = self._sim_est(mh, x0)
             if Yh is None:
                 return None
             cols.append((((Yh - base) * self.w).ravel()) / h)

@@ -79,6 +79,32 @@ def test_a_resumed_jump_sensitivity_equals_the_full_simulation(kind):
         assert np.max(np.abs(full)) > 0
 
 
+def test_after_the_jump_the_current_models_kernel_continues_with_the_same_numbers(monkeypatch):
+    """``Family.settled``: past the sample interval holding t_j the jumped parameter is a constant, so
+    the sensitivity simulation continues with the current model (no interpreted rewrite). Only a few
+    rows are simulated with the rewrite, and the result is the full simulation's bit for bit (a
+    time-invariant model: the same floating-point operations in the same order)."""
+    import pipeline.diagnostics.engine as E
+    dg, fit, ctx = _setting("warmup")
+    rows = []
+    real = E.simulate_states
+
+    def spy(model, t, *a, **k):
+        rows.append((bool(model.param_rewrites), len(t)))
+        return real(model, t, *a, **k)
+
+    monkeypatch.setattr(E, "simulate_states", spy)
+    for h in REGISTRY["parameter_jump"].hypotheses(ctx)[::5]:
+        rows.clear()
+        fast = dg.sensitivity(fit, h, ctx.X)
+        rewritten = [n for rw, n in rows if rw]
+        assert rewritten and max(rewritten) <= dg.RESUME_BACK + 2
+        assert sum(n for rw, n in rows if not rw) > 50        # the rest, with the current model
+        h.acts_from = None
+        full = dg.sensitivity(fit, h, ctx.X)
+        np.testing.assert_array_equal(fast, full)
+
+
 def test_the_screened_jump_test_is_conservative_and_keeps_one_time_per_parameter():
     dg, fit, ctx = _setting("warmup")
     hyps = REGISTRY["parameter_jump"].hypotheses(ctx)

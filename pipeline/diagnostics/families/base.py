@@ -143,6 +143,14 @@ class Family:
         """The model the refit starts from (default: the tested extension at the Wald estimate)."""
         return self.extend(model, hyp, start)
 
+    def settled(self, model: Model, hyp: Hypothesis, values: dict[str, float]) -> Model | None:
+        """For a hypothesis with ``acts_from``: a model without the extension's programs that equals the
+        extension (``extend(model, hyp, values)``) at every time after ``acts_from`` (a jump that has
+        happened is a constant parameter), so the added-term test's simulation can continue with the
+        current model's own kernel once the sample interval holding ``acts_from`` is passed; None: the
+        extension is simulated to the end."""
+        return None
+
     def describe(self, hyp: Hypothesis, fit, val: dict, sd: dict) -> tuple[dict, str]:
         """Key parameters (contract §2 names) and the subject of the finding's sentence."""
         c0 = hyp.coefs[0]

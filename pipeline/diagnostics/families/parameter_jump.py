@@ -11,6 +11,8 @@ t_j between its neighbours (the grid refits converged to ``GRID_FTOL``, enough t
 search and the final refit to least_squares' default), t_j fixed in the final refit and counted as an estimated parameter
 (``Hypothesis.searched``) in ΔBIC and the likelihood-ratio test."""
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...fit import estimated_x0, fit_output_error
@@ -92,6 +94,12 @@ class ParameterJump(Family):
         if best is None:
             return None
         return fit_output_error(best.model, dg.prob, start=estimated_x0(best))
+
+    def settled(self, model, hyp, values):
+        """After t_j the rewrite ``p + Δ·step(t − t_j)`` is the constant p + Δ: the kernel computes
+        p + Δ·1.0 = p + Δ, the same double as this sum, so the continued simulation is the same numbers."""
+        k, d = hyp.parameter, hyp.coefs[0]
+        return replace(model, params={**model.params, k: model.params[k] + values[d]})
 
     def describe(self, hyp, fit, val, sd):
         k = hyp.parameter
