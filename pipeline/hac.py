@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import dct, next_fast_len
-from scipy.linalg import hankel, qr, toeplitz
+from scipy.linalg import qr
 
 A_CAP = 0.99   # largest singular value allowed for the prewhitening VAR(1) matrix
 
@@ -112,9 +112,10 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
     for a in range(s.shape[1]):
         sa = s[:, a]
         # WᵀW_jk = (2/N) Σ s² cos_j cos_k = (1/N) Σ s² (cos_{j−k} + cos_{j+k}) from one DCT-II of s²:
-        # a Toeplitz plus a Hankel matrix in y (the same entries as y[|j−k|] + y[j+k], built by stride)
+        # a Toeplitz plus a Hankel matrix in y (y[|j−k|] + y[j+k+2] with the index shift, gathered)
         y = np.concatenate([dct(sa * sa, type=2), [0.0]]) / 2.0       # index N: cos(π N(t+½)/N) = 0
-        wtw = (toeplitz(y[:b]) + hankel(y[2:b + 2], y[b + 1:2 * b + 1])) / n
+        it, ih = _toeplitz_hankel_index(b)
+        wtw = (y[it] + y[ih]) / n
         tot = float(np.trace(wtw))
         if tot <= 0:
             continue
@@ -126,7 +127,23 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
     return kap, nus
 
 
+_TH_INDEX: dict = {}
+
+
+def _toeplitz_hankel_index(b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index arrays |j − k| and j + k + 2 (j, k < b): y[it] + y[ih] is toeplitz(y[:b]) +
+    hankel(y[2:b + 2], y[b + 1:2b + 1]) element for element, gathered without scipy's strided copies
+    (1.4 ms instead of 2.8 ms at b = 804, Silverbox's number of cosines)."""
+    if b not in _TH_INDEX:
+        if len(_TH_INDEX) > 16:
+            _TH_INDEX.clear()
+        i = np.arange(b)
+        _TH_INDEX[b] = (np.abs(i[:, None] - i[None, :]), i[:, None] + i[None, :] + 2)
+    return _TH_INDEX[b]
+
+
 FAST_FROM = 4096     # design_terms trims longer series to a length the FFT handles fast (see _fast_rows)
+_FAST_M: dict[int, int] = {}
 
 
 def _fast_rows(a: np.ndarray) -> np.ndarray:
@@ -138,9 +155,14 @@ def _fast_rows(a: np.ndarray) -> np.ndarray:
     n = a.shape[0]
     if n < FAST_FROM:
         return a
-    m = n
-    while next_fast_len(m, real=False) != m:
-        m -= 1
+    m = _FAST_M.get(n)
+    if m is None:
+        m = n
+        while next_fast_len(m, real=False) != m:
+            m -= 1
+        if len(_FAST_M) > 4096:
+            _FAST_M.clear()
+        _FAST_M[n] = m
     return a[n - m:]
 
 
