@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 from scipy.fft import next_fast_len
+from scipy.linalg import qr
 from scipy.special import gammaln
 
 from .. import hac
@@ -48,6 +49,16 @@ def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
     f = np.fft.rfft(x, m)
     r = np.fft.irfft(f * np.conj(f), m)[: nlags + 1] / n
     return r
+
+
+def _acov(x: np.ndarray, nlags: int) -> np.ndarray:
+    """Autocovariances r_k = Σ_t x̃_t x̃_{t+k} / N, k = 0..nlags (x̃ centred): the biased estimator of
+    :func:`_acf`, by direct sums. For the few lags an AR fit needs this is cheaper than the FFT of
+    twice the length (11 lags of 90 000 samples: 0.1 ms against 3 ms) and has no FFT rounding."""
+    x = np.asarray(x, float)
+    x = x - x.mean()
+    n = len(x)
+    return np.array([float(x[:n - k] @ x[k:]) / n for k in range(min(nlags, n - 1) + 1)])
 
 
 def _lags(n: int, nlags: int) -> int:
@@ -250,7 +261,7 @@ def prewhiten_ar(e: np.ndarray, pmax: int = 20) -> tuple[np.ndarray, np.ndarray]
     pmax = int(max(0, min(pmax, n // 10)))
     if pmax == 0 or not np.any(x):
         return x, np.zeros(0)
-    fits = levinson(_acf(x, pmax), pmax)
+    fits = levinson(_acov(x, pmax), pmax)
     aic = [n * math.log(max(v, 1e-300)) + 2 * len(a) for a, v in fits]
     a = fits[int(np.argmin(aic))][0]
     p = len(a)
