@@ -14,6 +14,31 @@ SECTIONS = ["pipeline.bench.core", "pipeline.bench.estimators", "pipeline.bench.
             "pipeline.bench.assignment", "pipeline.bench.report"]
 
 
+# a section's hand-written history goes below this line; a re-run of the section keeps it
+NOTES = "<!-- notes: written by hand, kept when this section is re-run -->"
+
+
+def _section_span(text: str, head: str, start_mark: str) -> tuple[int, int] | None:
+    """[i, j) of the section whose first line is ``head``: up to the next "## " heading or the
+    diagnosis bench's start marker."""
+    if head not in text:
+        return None
+    i = text.index(head)
+    ends = [j for j in (text.find("\n## ", i + len(head)), text.find(start_mark, i + len(head))) if j >= 0]
+    return i, (min(ends) if ends else len(text))
+
+
+def with_notes(old: str, part: str, start_mark: str) -> str:
+    """``part`` (a freshly generated section) followed by the hand-written notes of the same section in
+    ``old``, from its :data:`NOTES` line on (nothing when it has none)."""
+    part = part.strip()
+    span = _section_span(old, part.splitlines()[0], start_mark)
+    if span is None:
+        return part
+    sec = old[span[0]:span[1]]
+    return part if NOTES not in sec else part + "\n\n" + sec[sec.index(NOTES):].rstrip()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke run, numbers not meaningful)")
@@ -40,17 +65,15 @@ def main(argv=None) -> int:
     # keep the section of `make bench-diagnosis` (pipeline.bench.diagnosis), which runs separately
     from .diagnosis import END, START
     old = out.read_text() if out.exists() else ""
+    parts = parts[:2] + ["\n" + with_notes(old, part, START) + "\n" for part in parts[2:]]
     if a.only and old:
         # replace only the sections that ran (by their "## " heading); every other section stays
         text = old
         for part in parts[2:]:
             part = part.strip()
-            head = part.splitlines()[0]
-            if head in text:
-                i = text.index(head)
-                ends = [j for j in (text.find("\n## ", i + len(head)), text.find(START, i + len(head))) if j >= 0]
-                j = min(ends) if ends else len(text)
-                text = text[:i] + part + "\n" + text[j:]
+            span = _section_span(text, part.splitlines()[0], START)
+            if span is not None:
+                text = text[:span[0]] + part + "\n" + text[span[1]:]
             else:
                 text = text.rstrip() + "\n\n" + part + "\n"
         out.write_text(text)

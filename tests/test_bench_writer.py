@@ -1,0 +1,69 @@
+"""`python -m pipeline.bench` rewrites the sections it runs; a section's hand-written notes (below
+its NOTES line) and every other section survive, with --only and in a full run."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import pipeline.bench.__main__ as bm
+from pipeline.bench.diagnosis import END, START
+
+OLD = f"""# Benchmarks
+
+Machine: old.
+
+## Sec: the first
+
+| old table |
+
+{bm.NOTES}
+
+History paragraph written by hand.
+
+## Other: untouched
+
+other text
+
+{START}
+diagnosis block
+{END}
+"""
+
+
+def _fake_section(monkeypatch, text):
+    mod = types.ModuleType("benchfake.sec")
+    mod.run = lambda quick=False: text
+    monkeypatch.setitem(sys.modules, "benchfake.sec", mod)
+    monkeypatch.setattr(bm, "SECTIONS", ["benchfake.sec"])
+
+
+def test_only_keeps_the_sections_notes_and_the_other_sections(tmp_path, monkeypatch):
+    out = tmp_path / "B.md"
+    out.write_text(OLD)
+    _fake_section(monkeypatch, "## Sec: the first\n\n| new table |\n")
+    assert bm.main(["--only", "sec", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| new table |" in text and "| old table |" not in text
+    assert text.index("| new table |") < text.index("History paragraph written by hand.") < text.index("## Other")
+    assert text.count(bm.NOTES) == 1
+    assert "other text" in text and "diagnosis block" in text
+
+
+def test_a_full_run_keeps_the_notes_too(tmp_path, monkeypatch):
+    out = tmp_path / "B.md"
+    out.write_text(OLD)
+    _fake_section(monkeypatch, "## Sec: the first\n\n| new table |\n")
+    assert bm.main(["--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| new table |" in text and "History paragraph written by hand." in text
+    assert "diagnosis block" in text
+
+
+def test_a_section_without_notes_is_replaced_whole(tmp_path, monkeypatch):
+    out = tmp_path / "B.md"
+    out.write_text(OLD.replace(bm.NOTES + "\n\nHistory paragraph written by hand.\n", ""))
+    _fake_section(monkeypatch, "## Sec: the first\n\n| new table |\n")
+    assert bm.main(["--only", "sec", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| new table |" in text and bm.NOTES not in text and "| old table |" not in text
