@@ -28,6 +28,14 @@ other text
 {START}
 diagnosis block
 {END}
+
+### Held-out seeds, written below the block
+
+held-out table
+
+## Last: generated
+
+last text
 """
 
 
@@ -57,7 +65,7 @@ def test_a_full_run_keeps_the_notes_too(tmp_path, monkeypatch):
     assert bm.main(["--out", str(out)]) == 0
     text = out.read_text()
     assert "| new table |" in text and "History paragraph written by hand." in text
-    assert "diagnosis block" in text
+    assert "diagnosis block" in text and "held-out table" in text
 
 
 def test_a_section_without_notes_is_replaced_whole(tmp_path, monkeypatch):

@@ -80,7 +80,9 @@ def main(argv=None) -> int:
         print(f"updated {', '.join(a.only)} in {a.out}")
         return 0
     if START in old and END in old:
-        parts.append("\n" + old[old.index(START):old.index(END) + len(END)] + "\n")
+        # with the text written below its end marker (the held-out seeds' tables), up to the next section
+        j = old.find("\n## ", old.index(END))
+        parts.append("\n" + old[old.index(START):j if j >= 0 else len(old)].rstrip() + "\n")
     out.write_text("\n".join(parts))
     print(f"wrote {a.out}")
     return 0
