@@ -11,6 +11,7 @@ from scipy import signal
 from pipeline.data import Split
 from pipeline.diagnostics.engine import Diagnoser
 from pipeline.diagnostics.families import FAMILY_IDS, REGISTRY
+from pipeline.diagnostics.families.base import Family
 from pipeline.expressions import parse
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
@@ -95,3 +96,32 @@ def test_a_null_reused_from_the_fit_is_the_fit(setting, fid):
             continue
         m0 = dg.hyp_model(fit, h)
         np.testing.assert_array_equal(dg._sim_est(m0, dg._x0_for(fit, m0)), fit.Yhat[est])
+
+
+SETTLING = [f for f in FAMILY_IDS if type(REGISTRY[f]).settled is not Family.settled]
+
+
+def test_some_family_settles():
+    assert "parameter_jump" in SETTLING
+
+
+@pytest.mark.parametrize("fid", SETTLING)
+def test_a_settled_model_equals_the_extension_after_it_acts(setting, fid):
+    """``Family.settled``: after the sample interval holding ``acts_from`` the settled model (no
+    programs of the extension) simulates exactly what the extension does, from the same state."""
+    from pipeline.simulate import simulate_states
+    dg, fit, ctx = setting
+    fam = REGISTRY[fid]
+    prob = dg.prob
+    hyps = [h for h in fam.hypotheses(ctx) if h.acts_from is not None]
+    assert hyps
+    for h in hyps[::4]:
+        vals = {c: float(h.null.get(c, 0.0)) + 0.2 * float(h.info.get("scale", 1.0)) for c in h.coefs}
+        after = fam.settled(fit.model, h, vals)
+        assert after is not None and not after.param_rewrites
+        m = fam.extend(fit.model, h, vals)
+        X = simulate_states(m, prob.t, prob.U, fit.x0).X
+        j = int(np.searchsorted(prob.t, h.acts_from, side="right"))
+        Xa = simulate_states(after, prob.t[j:], prob.U[j:], X[j]).X
+        np.testing.assert_array_equal(Xa, X[j:])
+        assert np.max(np.abs(X[j:] - simulate_states(fit.model, prob.t, prob.U, fit.x0).X[j:])) > 0
