@@ -301,18 +301,16 @@ class Diagnoser:
         k = min(k, e1 - 1)
         # every stage time of the intervals from sample j on is at or after t[j] > t_from
         j = k + self.RESUME_BACK + 1
-        if after is not None and j < e1 - 1:
-            res = simulate_states(model, prob.t[k:j + 1], prob.U[k:j + 1], X[k - s0], bound=prob.bound)
-            if res.diverged_at is not None:
-                return None
+        split = after is not None and j < e1 - 1
+        stop = j + 1 if split else e1
+        res = simulate_states(model, prob.t[k:stop], prob.U[k:stop], X[k - s0], bound=prob.bound)
+        if res.diverged_at is not None:
+            return None
+        if split:
             rest = simulate_states(after, prob.t[j:e1], prob.U[j:e1], res.X[-1], bound=prob.bound)
             if rest.diverged_at is not None:
                 return None
             res = replace(res, X=np.concatenate([res.X[:-1], rest.X]))
-        else:
-            res = simulate_states(model, prob.t[k:e1], prob.U[k:e1], X[k - s0], bound=prob.bound)
-            if res.diverged_at is not None:
-                return None
         Y = np.array(fit.Yhat[e0:e1], dtype=float, copy=True)
         Y[k - e0:] = outputs(model, prob.t[k:e1], prob.U[k:e1], res.X, prob.out_names)
         return Y

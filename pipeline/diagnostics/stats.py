@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 from scipy.fft import next_fast_len
-from scipy.linalg import qr
 from scipy.special import gammaln
 
 from .. import hac
