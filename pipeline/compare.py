@@ -12,7 +12,8 @@ simulated free-run with the nominal model's other equations and scored on the sa
   measured state when every state is measured, else from the record start),
 * one-step (equation-error) RMSE per fold, labelled as such,
 * AIC, AICc, BIC, FPE (MATLAB definitions) and the course project's energy BIC k ln N + N ln(E/N)
-  from the free-run residual on the estimation part, E = Σe² the error energy,
+  from the free-run residual on the estimation part, E = ∫e² dt ≈ Σe²·Δt the error energy (the
+  ``energy`` field; seed case ``kar_p2a_series_parallel_energy`` defines E so),
 * validation free-run RMSE (data never used for fitting).
 """
 
@@ -213,9 +214,9 @@ class Comparer:
             es, vs = self.split.est_slice(), self.split.val_slice()
             res = self.Y[es] - Yh[es]
             n, p = res.shape[0], r.theta.size
-            r.energy = float(np.sum(res ** 2) * self.rec.dt)
+            r.energy = float(np.sum(res ** 2) * self.rec.dt)   # E = ∫e² dt (seed 000's E column)
             r.crit = {"aic": criteria.aic(res, p), "aicc": criteria.aicc(res, p), "bic": criteria.bic(res, p),
-                      "fpe": criteria.fpe(res, p), "bic_energy": criteria.bic_energy(float(np.sum(res ** 2)), n, p)}
+                      "fpe": criteria.fpe(res, p), "bic_energy": criteria.bic_energy(r.energy, n, p)}
             r.val_rmse = float(np.sqrt(np.mean((self.Y[vs] - Yh[vs]) ** 2)))
             for train, val in self.folds:
                 ef = fit(self.est_rows[train])
@@ -241,12 +242,18 @@ class Comparer:
             if len(terms) >= len(self.est_rows):
                 raise InputError(f"{len(terms)} candidate terms but only {len(self.est_rows)} estimation samples; "
                                  "expected fewer terms than samples", file=self.file, key=f"structures.candidates.{name}")
-        self.folds = blocked_folds(len(self.est_rows), sc.cv_folds, sc.cv_gap, self.lc.cfg.seed)
+        # in fold order (fold f holds the f-th block of the estimation part): cv_rmse_sim[f] is that block's
+        # score; the folds are contiguous blocks, so there is nothing random to seed
+        self.folds = blocked_folds(len(self.est_rows), sc.cv_folds, sc.cv_gap)
         out = Comparison([], None, warnings=list(self.warnings),
                          settings={"equation": self.eq, "known": self.known_text, "folds": sc.cv_folds,
                                    "gap": sc.cv_gap, "derivative": sc.derivative.model_dump(),
                                    "cv_start": "measured state at the fold start" if self.all_measured
-                                   else "record start"})
+                                   else "record start",
+                                   # record sample indices [start, stop) of fold f's validation block:
+                                   # cv_rmse_sim[f] and cv_rmse_one_step[f] are scored there
+                                   "fold_blocks": [[int(self.est_rows[v[0]]), int(self.est_rows[v[-1]]) + 1]
+                                                   for _, v in self.folds]})
         if sc.library is not None:
             out.frols = self.run_frols()
             cands["frols"] = out.frols["terms"]

@@ -9,7 +9,8 @@ For N samples, p estimated parameters and the residual covariance estimate
 * FPE  = Σ̂ (1 + p/N)/(1 − p/N)
 
 and the course project's energy-based BIC (seed 000, Problem 2(b)): BIC = k ln N + N ln(E/N), where E is
-the error energy Σe² (the table reproduces with N = 20001, seed case ``kar_p2b_bic``).
+the error energy ∫e² dt ≈ Σe²·Δt of Problem 2(a)'s table (seed case ``kar_p2a_series_parallel_energy``;
+with those E and N = 20001 the table of ``kar_p2b_bic`` reproduces).
 """
 
 from __future__ import annotations
@@ -52,5 +53,5 @@ def fpe(residuals: np.ndarray, p: int) -> float:
 
 
 def bic_energy(energy: float, n: int, k: int) -> float:
-    """Course-project BIC: k ln N + N ln(E/N) with E the error energy (seed 000, Problem 2(b))."""
+    """Course-project BIC: k ln N + N ln(E/N) with E = ∫e² dt the error energy (seed 000, Problem 2(b))."""
     return k * math.log(n) + n * math.log(energy / n)

@@ -61,6 +61,23 @@ def test_true_structure_wins_cv_and_bic(course_project):
     assert rows["M3"]["theta"] == pytest.approx([-1.0, 0.8, 1.2], abs=0.02)
 
 
+def test_energy_bic_uses_the_reported_energy_and_folds_come_in_block_order(course_project):
+    """E is seed 000's ∫e² dt (Σe²·Δt, the ``energy`` field), and bic_energy = k ln N + N ln(E/N) of
+    that same E (it used Σe² while ``energy`` held Σe²·Δt); cv_rmse_sim[f] is block f of the estimation
+    part, in order (the folds were returned in a seeded random order)."""
+    import math
+    _, s = course_project
+    n = s["data"]["estimation"][1] - s["data"]["estimation"][0]
+    for m in _rows(s).values():
+        if m["error"] is None:
+            k = len(m["theta"])
+            assert m["bic_energy"] == pytest.approx(k * math.log(n) + n * math.log(m["energy"] / n), rel=1e-12)
+    blocks = s["structures"]["settings"]["fold_blocks"]
+    e0, e1 = s["data"]["estimation"]
+    assert len(blocks) == 5 and blocks[0][0] == e0 and blocks[-1][1] == e1
+    assert all(a[1] == b[0] for a, b in zip(blocks, blocks[1:]))   # block f then block f + 1
+
+
 def test_frols_finds_the_true_terms(course_project):
     _, s = course_project
     assert set(s["structures"]["frols"]["terms"]) == {"x**3", "tanh(x)", "1/(1+x**2)"}
