@@ -151,7 +151,8 @@ class SplitCfg(_Strict):
     estimation: tuple[Integer, Integer | None] | None = None
     validation: tuple[Integer, Integer | None] | None = None
     # fitting simulations start this many samples before the estimation part (from the configured
-    # initial state) instead of at sample 0; reported errors always use the simulation from sample 0
+    # initial state) instead of at sample 0; that simulation is the one tested and reported on the
+    # estimation part, and validation errors use the free run of their own segment (fit.simulate_full)
     warmup: Annotated[Integer, Field(ge=0)] | None = None
 
 

@@ -31,6 +31,7 @@ from .jsonutil import dumps
 from .config import LoadedConfig, implemented_families, load_config, noise_families
 from .errors import SimulationError
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
+from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .fit import FitResult, Problem, equation_error_start
 from .extended import extended_config
@@ -154,7 +155,9 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "schema": SCHEMA, "run_id": run_id, "config_sha256": cfg_sha, "data_sha256": rec.sha256,
         "data": {"n_samples": rec.n, "sample_time": rec.dt, "estimation": list(prob.split.est),
                  "validation": list(prob.split.val), "intersample": lc.cfg.data.intersample,
-                 "outputs": prob.out_names, "log": rec.log},
+                 "outputs": prob.out_names, "log": rec.log,
+                 "coverage": coverage(prob.U, prob.Y, list(diag.nominal.model.inputs), prob.out_names,
+                                      prob.split.est, prob.split.val)},
         "nominal": nominal,
         "final": model_block(diag.final, prob),
         "diagnosis": {
@@ -168,6 +171,7 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
             "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history)},
+            "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
         },
@@ -187,6 +191,13 @@ def _tried(history: list[dict]) -> list[dict]:
         for sk in it.get("skipped", []):
             out.setdefault(sk["family"], sk["reason"])
     return [{"family": f, "reason": r} for f, r in out.items()]
+
+
+def _not_testable(history: list[dict]) -> list[dict]:
+    """What a family's guard kept from being tested, and why (each reason once, first iteration first):
+    e.g. a static input nonlinearity on an input with two levels, a periodic term with too few cycles."""
+    seen = dict.fromkeys((sk["family"], sk["reason"]) for it in history for sk in it.get("skipped", []))
+    return [{"family": f, "reason": r} for f, r in seen]
 
 
 def _test_rows(tests, on: str) -> list[dict]:

@@ -125,6 +125,18 @@ def test_heating_system_is_unexplained_and_not_blamed_on_noise(tmp_path):
     assert any(t.startswith("model_error_model") for t in d["unexplained"]["failed_tests"])
     noise = {"colored_noise", "heavy_tailed_noise", "heteroscedastic_noise"}
     assert not noise & {f["family"] for f in d["findings"]}
+    # where the validation part goes beyond the estimation part, from the raw file: the voltage takes
+    # levels 6 and 7 V never seen in estimation (which has 3, 4, 8, 9 V), and the temperature falls
+    # below the estimation minimum
+    import numpy as np
+    raw = np.loadtxt(path)
+    e0, e1 = s["data"]["estimation"]
+    v0, v1 = s["data"]["validation"]
+    cov = {r["signal"]: r for r in s["data"]["coverage"]}
+    assert cov["V"]["estimation_levels"] == sorted(set(raw[e0:e1, 1])) == [3, 4, 8, 9]
+    assert cov["V"]["new_levels"] == [6, 7]
+    below = np.mean(raw[v0:v1, 2] < raw[e0:e1, 2].min())
+    assert below > 0.05 and cov["T"]["validation_outside_share"] == pytest.approx(below, abs=1e-12)
 
     cfg = yaml.safe_load((ROOT / "configs" / "heating_system.yaml").read_text())
     cfg["data"]["path"] = str(path)

@@ -960,7 +960,7 @@ class Diagnoser:
                     inter = (f_is, finding_is)
             rec = {"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]
                    + (hist["candidates"] if not switched else []),
-                   "skipped": [{"family": f, "reason": r} for f, r in skipped]}
+                   "skipped": [{"family": f, "reason": r} for f, r in dict.fromkeys(skipped)]}
             history.append(rec)
             acc = [c for c in cands if c.accepted]
             best = choose(acc)

@@ -15,6 +15,8 @@ import math
 import re
 from typing import Any
 
+from ..diagnostics.coverage import coverage_text
+
 _LONG_FLOAT = re.compile(r"(?<![\w.])-?\d+\.\d{5,}(?:[eE][-+]?\d+)?")
 
 
@@ -161,6 +163,13 @@ def first_screen(s: dict) -> dict:
                                f"{sig(where['time_window_s'][1], 4)} s and output range "
                                f"{sig(where['amplitude_range'][0], 4)} to {sig(where['amplitude_range'][1], 4)}"
                                if where.get("time_window_s") else "") + ".")
+    if verdict == "unexplained_discrepancy" and diag.get("not_testable"):
+        # what a guard kept from being tested may be what the model misses
+        warnings.append("Not tested, because these data cannot test it: " + "; ".join(
+            f"{g['family']}: {g['reason']}" for g in diag["not_testable"]) + ".")
+    cov = coverage_text((s.get("data") or {}).get("coverage") or [], lambda x: sig(x, 3))
+    if cov:
+        warnings.append(cov)
     for label, block in (("nominal", s.get("nominal") or {}), ("final", s.get("final") or {})):
         idf = block.get("identifiability") or {}
         if idf.get("unidentifiable"):

@@ -114,6 +114,22 @@ def test_negative_fit_and_unexplained_verdict_are_warned_plainly():
     assert "Main cause: cubic_stiffness" in " ".join(view.first_screen(_summary(50.0, 60.0))["lines"])
 
 
+def test_first_screen_says_what_could_not_be_tested_and_where_validation_extrapolates():
+    import numpy as np
+    from pipeline.diagnostics.coverage import coverage
+    guard = [{"family": "periodic_disturbance", "reason": "peak at 0.01 Hz is 1.2 cycles in the estimation window"}]
+    y = np.r_[np.linspace(0, 1, 100), np.linspace(-0.5, 1, 100)][:, None]   # a third of validation below
+    s = _summary(50.0, 60.0, verdict="unexplained_discrepancy")
+    s["diagnosis"]["not_testable"] = guard
+    s["data"]["coverage"] = coverage(np.ones_like(y), y, ["u"], ["y"], (0, 100), (100, 200))
+    w = view.first_screen(s)["warnings"]
+    assert any(x.startswith("Not tested") and "periodic_disturbance: peak at 0.01 Hz is 1.2 cycles" in x for x in w)
+    assert any("output y spans -0.5 to 1 on validation, 0 to 1 on estimation (33 % of validation" in x for x in w)
+    # a verdict with its causes named: the guards are not the story, so no "not tested" line
+    s["diagnosis"]["verdict"] = "discrepancy"
+    assert not [x for x in view.first_screen(s)["warnings"] if x.startswith("Not tested")]
+
+
 def test_recommendation_reconciles_diagnosis_model_and_cv_winner():
     cv_rows = [{"name": "M3", "estimator": "ls", "cv_mean": 0.01, "validation_rmse_sim": 0.1 / 250,
                 "cv_rmse_one_step": [0.1]},
