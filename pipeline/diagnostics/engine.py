@@ -67,6 +67,9 @@ class Candidate:
     runner_up: bool = False      # a family's near-tie second hypothesis (Diagnoser._near_tie)
     places: int = 1              # distinct places the family's hypotheses act on (Diagnoser._where)
     lr: stats.TestResult | None = None   # the likelihood-ratio test of the refit against the current model
+    # the family's next significant hypotheses, refitted only if this one's refit fails from every start
+    # (Diagnoser._fallbacks); (Hypothesis, WaldResult) pairs, largest linearised share first
+    alternates: list = field(default_factory=list)
 
     @property
     def prior_penalty(self) -> float:
@@ -559,8 +562,49 @@ class Diagnoser:
             best.places = len({self._where(x) for x in hyps})
             out.append(best)
             if sig and best.hyp is h:
-                out += [replace(c, places=best.places) for c in self._near_tie(fit, h, wr, sig, best.p_family)]
+                tie = [replace(c, places=best.places) for c in self._near_tie(fit, h, wr, sig, best.p_family)]
+                out += tie
+                best.alternates = self._alternates(h, wr, sig, [c.hyp for c in tie])
         return out, ctx.skipped
+
+    FALLBACK_SHARE = 0.5   # a family's hypothesis explaining this share of its representative's is a fallback
+    MAX_FALLBACKS = 3
+
+    def _alternates(self, h: Hypothesis, wr, sig: list, taken: list[Hypothesis]) -> list:
+        """The family's other significant hypotheses that explain at least ``FALLBACK_SHARE`` of the
+        representative's linearised share, largest first, one per column (h*abs(h) is h**2 on a positive
+        level), at most ``MAX_FALLBACKS``; refitted only when the representative's refit fails from every
+        start (:meth:`_fallbacks`)."""
+        seen = [wr] + [w for h2, w in sig if any(h2 is t for t in taken)]
+        same = lambda a, b: (abs(a.r2 - b.r2) <= 1e-9 * b.r2
+                             and abs(a.statistic - b.statistic) <= 1e-9 * abs(b.statistic))
+        out = []
+        for h2, w2 in sorted(sig, key=lambda x: -x[1].r2):
+            if h2 is h or any(h2 is t for t in taken) or w2.r2 < self.FALLBACK_SHARE * wr.r2:
+                continue
+            if any(same(w2, w) for w in seen):
+                continue
+            seen.append(w2)
+            out.append((h2, w2))
+        return out[:self.MAX_FALLBACKS]
+
+    def _fallbacks(self, todo: list[Candidate]) -> list[Candidate]:
+        """For a family whose representative's refit failed from every start (it diverged, or ended
+        above the current model's error), its next significant hypotheses (:meth:`_alternates`) as candidates to refit: the linearised share ranks
+        hypotheses only near the current fit, and the one it ranks first can be one that cannot be
+        simulated (on a tank with square-root outflow fitted as linear, c·h² with c > 0 runs away
+        while sqrt(h), ranked below it, is the cause)."""
+        out = []
+        for c in todo:
+            if c.fit is not None or not c.alternates or not c.reason.startswith("refit failed"):
+                continue
+            keys = ", ".join(h2.key for h2, _ in c.alternates)
+            c.reason += f"; the family's next significant hypotheses refitted instead: {keys}"
+            for h2, w2 in c.alternates:
+                out.append(Candidate(h2, w2, c.p_family, [{"test": f"added_term_wald[{h2.key}]",
+                                                           "statistic": w2.statistic, "p_value": w2.p_value,
+                                                           "dof": w2.dof}], runner_up=True, places=c.places))
+        return out
 
     WITHIN_TIE = 0.8   # a family's runner-up explaining this share of its best hypothesis' is refitted too
 
@@ -939,6 +983,11 @@ class Diagnoser:
                                             np.random.default_rng([self.seed, 1000 + it]))
                 for c, f in zip(todo, pool.map(lambda c: c.fit or self.estimate(current, c), todo)):
                     c.fit = f
+                extra = self._fallbacks(todo)
+                for c, f in zip(extra, pool.map(lambda c: self.estimate(current, c), extra)):
+                    c.fit = f
+            cands += extra
+            todo += extra
             for c in todo:
                 if c.fit is None:
                     c.reason = c.reason or "no extension estimated"
