@@ -4,10 +4,12 @@ A run folder is written into a hidden temporary folder beside the target and pub
 so the final name never holds a partial run and nothing this tool did not create is ever removed.
 
 **What a run folder is.** A folder holding the regular file ``.sysid-run`` (the *marker*), a JSON
-object ``{"tool": "sysid-pipeline", "format": 1, "run_id": ..., "files": {relative path: size}}``.
-The marker is written last, after every other file has been written and flushed, so a folder with a
-valid marker whose listed files all exist with the listed sizes is *complete* (what readers use), and
-it is *replaceable* only when it holds nothing but those files (a user's added note keeps it safe). Folders written by
+object ``{"tool": "sysid-pipeline", "format": 2, "run_id": ..., "files": {relative path: {"size":
+bytes, "sha256": hex}}}`` (format 1, written before, lists sizes only). The marker is written last,
+after every other file has been written and flushed, so a folder with a valid marker whose listed files
+all exist with the listed sizes is *complete* (what readers use), and it is *replaceable* only when it
+holds nothing but those files, each with its listed content (sha256 in format 2): a user's added note,
+or an edit that keeps a file's size, keeps it safe. Folders written by
 releases before the marker existed are recognised too (:func:`is_legacy_run`): only regular files, all
 with the names the old ``write_run`` wrote, with ``summary.json`` of schema ``sysid-summary/*`` and a
 ``manifest.json`` naming ``sysid-pipeline``.
@@ -18,7 +20,9 @@ with the names the old ``write_run`` wrote, with ``summary.json`` of schema ``sy
 - ``.<name>.old-<pid>-<8 hex>``  the previous run, moved aside for the moment of the swap.
 
 A later run into the same parent removes such folders once their pid is dead (or they are older
-than a day, in case the pid was reused): :func:`clean_stale`. Nothing without this naming is touched.
+than a day, in case the pid was reused), and only when they are this tool's: a temp folder holds the
+token file ``.sysid-tmp`` (created with it, removed when the run is finalized) and a moved-aside run its
+marker (:func:`clean_stale`). A user's folder that merely has such a name is never touched.
 
 **Publishing** (:func:`publish`) holds an exclusive ``fcntl.flock`` on the parent folder (or, where
 a folder cannot be locked, on ``.<name>.lock`` beside the target), so concurrent runs of one config
@@ -37,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import hashlib
 import json
 import os
 import re
@@ -52,7 +57,8 @@ from .errors import InputError
 
 TOOL = "sysid-pipeline"
 MARKER = ".sysid-run"
-MARKER_FORMAT = 1
+MARKER_FORMAT = 2
+TMP_TOKEN = ".sysid-tmp"   # in a temp folder from its creation until finalize: this tool made it
 STALE_AGE_S = 86400.0
 KILL_POINTS = ("after_temp_created", "after_summary_written", "after_old_moved_aside",
                "after_new_renamed_in", "before_old_deleted")
@@ -115,16 +121,33 @@ def is_legacy_run(folder: Path) -> bool:
             and TOOL in manifest["versions"])
 
 
-def _listed_files_ok(folder: Path, files: dict) -> bool:
-    for rel, size in files.items():
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _listed_files_ok(folder: Path, files: dict, content: bool = False) -> bool:
+    """Every listed file is a regular file of its listed size, and with ``content`` also of its
+    listed sha256 (format 2 entries ``{"size", "sha256"}``; a format-1 entry is the size alone)."""
+    for rel, entry in files.items():
         if not isinstance(rel, str) or Path(rel).is_absolute() or ".." in Path(rel).parts:
             return False
+        size = entry.get("size") if isinstance(entry, dict) else entry
         try:
             st = os.lstat(folder / rel)
         except OSError:
             return False
         if not stat.S_ISREG(st.st_mode) or st.st_size != size:
             return False
+        if content and isinstance(entry, dict):
+            try:
+                if _sha256(folder / rel) != entry.get("sha256"):
+                    return False
+            except OSError:
+                return False
     return True
 
 
@@ -144,14 +167,17 @@ def is_complete_run(folder: Path) -> bool:
 
 
 def is_replaceable_run(folder: Path) -> bool:
-    """A complete run folder holding nothing else: every file below it is listed in the marker (or
-    it is a legacy run folder). A run folder to which the user added a file is not replaceable."""
+    """A complete run folder holding nothing else: every file below it is listed in the marker, with
+    its listed content (or it is a legacy run folder). A run folder to which the user added a file, or
+    in which a file was edited, is not replaceable."""
     folder = Path(folder)
     if not is_complete_run(folder):
         return False
     marker = read_marker(folder)
     if marker is None:
         return True  # legacy: is_legacy_run already allows only the old file names
+    if not _listed_files_ok(folder, marker["files"], content=True):
+        return False
     allowed = set(marker["files"]) | {MARKER}
     for dirpath, dirnames, filenames in os.walk(folder):
         for fn in filenames:   # os.walk lists symlinks to folders as dirnames: check those too
@@ -374,7 +400,9 @@ def _pid_alive(pid: int) -> bool:
 def clean_stale(parent: Path, *, now: float | None = None) -> list[Path]:
     """Remove the temp/old folders of dead runs in ``parent``: only real folders (not symlinks) named
     ``.<name>.tmp-<pid>-<hex8>`` or ``.<name>.old-<pid>-<hex8>`` whose pid is not alive or whose
-    modification time is more than a day ago. Returns what was removed; errors are ignored."""
+    modification time is more than a day ago, and that this tool made: a temp folder holding the token
+    ``.sysid-tmp`` (or a finalized one, with its marker) or nothing at all, a moved-aside folder that is
+    a run of this tool. Returns what was removed; errors are ignored."""
     now = time.time() if now is None else now
     removed = []
     try:
@@ -393,9 +421,22 @@ def clean_stale(parent: Path, *, now: float | None = None) -> list[Path]:
             continue
         if _pid_alive(int(m["pid"])) and now - st.st_mtime < STALE_AGE_S:
             continue
+        if not _made_here(Path(e.path), m["kind"]):
+            continue
         shutil.rmtree(e.path, ignore_errors=True)
         removed.append(Path(e.path))
     return removed
+
+
+def _made_here(folder: Path, kind: str) -> bool:
+    """Was ``folder`` (named as this tool's temp or moved-aside folder) made by this tool?"""
+    try:
+        entries = [e.name for e in os.scandir(folder)]
+    except OSError:
+        return False
+    if kind == "tmp" and (not entries or TMP_TOKEN in entries):
+        return True            # killed between mkdir and the token, or while writing
+    return read_marker(folder) is not None or is_legacy_run(folder)
 
 
 def make_temp(target: Path) -> Path:
@@ -410,6 +451,7 @@ def make_temp(target: Path) -> Path:
             continue
         except OSError as exc:
             raise _err(target, f"cannot create a folder in {target.parent}: {exc.strerror}") from None
+        (tmp / TMP_TOKEN).write_text(f"{TOOL} {os.getpid()}\n", encoding="utf-8")
         kill_point("after_temp_created")
         return tmp
     raise _err(target, f"cannot find a free temporary name in {target.parent}")
@@ -431,8 +473,11 @@ def _fsync_path(path: Path, *, directory: bool = False) -> None:
 
 def finalize(tmp: Path, run_id: str) -> None:
     """Flush every file of ``tmp`` to disk and write the marker last (listing every file and its
-    size), so ``tmp`` counts as complete only once everything else is there."""
-    files: dict[str, int] = {}
+    size and sha256), so ``tmp`` counts as complete only once everything else is there. The temp token
+    goes first: from here the marker says whose folder it is."""
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(tmp / TMP_TOKEN)
+    files: dict[str, dict] = {}
     for dirpath, dirnames, filenames in os.walk(tmp):
         dirnames.sort()
         for fn in sorted(filenames):
@@ -440,7 +485,7 @@ def finalize(tmp: Path, run_id: str) -> None:
             if p.is_symlink() or not p.is_file():
                 continue
             _fsync_path(p)
-            files[str(p.relative_to(tmp))] = p.stat().st_size
+            files[str(p.relative_to(tmp))] = {"size": p.stat().st_size, "sha256": _sha256(p)}
         _fsync_path(Path(dirpath), directory=True)
     files.pop(MARKER, None)
     marker = {"tool": TOOL, "format": MARKER_FORMAT, "run_id": run_id, "files": files}

@@ -3,6 +3,7 @@ the temp folder, publishing, cleaning stale folders, the reader's iterator, and 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -43,8 +44,15 @@ def _dead_pid() -> int:
 def test_marker_lists_every_file_with_its_size_and_only_complete_folders_count(tmp_path):
     run = _make_run(tmp_path / "run", {"summary.json": "{}\n", "sub/fig.png": "xyz"})
     m = json.loads((run / rf.MARKER).read_text())
-    assert m["tool"] == "sysid-pipeline" and m["files"] == {"summary.json": 3, "sub/fig.png": 3}
+    sha = lambda b: hashlib.sha256(b).hexdigest()
+    assert m["tool"] == "sysid-pipeline" and m["format"] == 2
+    assert m["files"] == {"summary.json": {"size": 3, "sha256": sha(b"{}\n")},
+                          "sub/fig.png": {"size": 3, "sha256": sha(b"xyz")}}
     assert rf.is_complete_run(run) and rf.is_replaceable_run(run)
+    (run / "summary.json").write_text("[]\n")              # the user's edit, same size
+    assert rf.is_complete_run(run) and not rf.is_replaceable_run(run)
+    with pytest.raises(InputError, match="--out.*did not write"):
+        rf.check_target(run, inputs=[], default=False)
     (run / "sub" / "fig.png").write_text("xy")             # truncated
     assert not rf.is_complete_run(run)
     (run / "sub" / "fig.png").unlink()                     # missing
@@ -219,6 +227,9 @@ def test_clean_stale_removes_only_dead_or_day_old_folders_of_this_tools_naming(t
         f".demo.bak-{dead}-0123abcd": "dir",
         f".demo.tmp-{dead}-aaaaaaaa": "file",
         f".demo.tmp-{dead}-bbbbbbbb": "link",
+        f".demo.tmp-{dead}-cccccccc": "empty",         # killed between mkdir and the token
+        f".thesis.tmp-{dead}-deadbeef": "user",        # our naming, but a user's folder: no token
+        f".thesis.old-{dead}-deadbeef": "user",        # ... and no run marker
     }
     for name, kind in made.items():
         p = tmp_path / name
@@ -226,14 +237,25 @@ def test_clean_stale_removes_only_dead_or_day_old_folders_of_this_tools_naming(t
             p.write_text("x")
         elif kind == "link":
             p.symlink_to(victim)
+        elif kind == "empty":
+            p.mkdir()
+        elif kind == "user":
+            p.mkdir()
+            (p / "chapter1.tex").write_text("mine\n")
         else:
             p.mkdir()
             (p / "summary.json").write_text("{}")
+            if ".old-" in name:
+                rf.finalize(p, "old-run")                 # a moved-aside run carries its marker
+            else:
+                (p / rf.TMP_TOKEN).write_text("sysid-pipeline\n")
             if kind == "dir-day-old":
                 t = time.time() - 2 * rf.STALE_AGE_S
                 os.utime(p, (t, t))
     removed = {p.name for p in rf.clean_stale(tmp_path)}
-    assert removed == {f".demo.tmp-{dead}-0123abcd", f".other.old-{dead}-89abcdef", f".demo.tmp-{me}-fedcba98"}
+    assert removed == {f".demo.tmp-{dead}-0123abcd", f".other.old-{dead}-89abcdef", f".demo.tmp-{me}-fedcba98",
+                       f".demo.tmp-{dead}-cccccccc"}
+    assert (tmp_path / f".thesis.tmp-{dead}-deadbeef" / "chapter1.tex").read_text() == "mine\n"
     assert set(os.listdir(tmp_path)) == (set(made) - removed) | {"victim"}
     assert os.listdir(victim) == ["keep.txt"]
 
