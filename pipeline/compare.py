@@ -280,8 +280,7 @@ class Comparer:
         lib_cfg = self.sc.library
         parts = []
         if lib_cfg.poly:
-            parts.append(L.poly(list(lib_cfg.poly.get("vars", [])), int(lib_cfg.poly.get("degree", 2)),
-                                include_bias=bool(lib_cfg.poly.get("include_bias", True))))
+            parts.append(L.poly(list(lib_cfg.poly.vars), lib_cfg.poly.degree, include_bias=lib_cfg.poly.include_bias))
         for fam in ("tanh", "rational", "sign"):
             if getattr(lib_cfg, fam):
                 parts.append(getattr(L, fam)(getattr(lib_cfg, fam)))

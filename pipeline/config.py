@@ -12,6 +12,7 @@ import builtins
 import hashlib
 import json
 import keyword
+import re
 import unicodedata
 from pathlib import Path
 from typing import Annotated, Literal, Union
@@ -197,10 +198,20 @@ class DerivativeCfg(_Strict):
     polyorder: Annotated[Integer, Field(ge=1, le=10)] = 3
 
 
+class PolyCfg(_Strict):
+    """All monomials of ``vars`` up to ``degree`` (with the constant unless ``include_bias: false``).
+    The degree is bounded: d variables give C(d + degree, degree) terms, a matrix of that many columns
+    by the estimation samples (3 variables of degree 10: 286 columns)."""
+
+    vars: list[StrictStr] = Field(min_length=1, max_length=10)
+    degree: Annotated[Integer, Field(ge=1, le=10)] = 2
+    include_bias: StrictBool = True
+
+
 class LibraryCfg(_Strict):
     """Candidate terms generated from a library (union of the listed families) for ERR/FROLS."""
 
-    poly: dict[str, Union[list[str], StrictBool, Integer]] | None = None   # {vars: [x], degree: 3}
+    poly: PolyCfg | None = None   # {vars: [x], degree: 3}
     tanh: list[str] | None = None
     rational: list[str] | None = None
     sign: list[str] | None = None
@@ -244,7 +255,7 @@ class StructuresCfg(_Strict):
 
 
 class Config(_Strict):
-    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str = Field(min_length=1)
     seed: Seed = 0
     data: DataCfg
     model: ModelCfg
@@ -259,6 +270,15 @@ class Config(_Strict):
     # overlaid on the Gauss ellipses) and the units of signals for axis labels, e.g. {x: m, u: N}
     uncertainty: Literal["gauss", "mcmc"] = "gauss"
     units: dict[str, StrictStr] = Field(default_factory=dict)
+
+    @field_validator("name")
+    @classmethod
+    def _run_folder_name(cls, v):
+        # it names the run folder: not hidden (a leading "." hides it from every reader) and not an option
+        if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", v):
+            raise ValueError("expected letters, digits, '_', '.' and '-', starting with a letter, digit or '_' "
+                             f"(it names the run folder), got {v!r}")
+        return v
 
     @field_validator("estimators")
     @classmethod
@@ -326,13 +346,24 @@ def _fmt_loc(loc: tuple) -> str:
 
 class _Loader(yaml.SafeLoader):
     """SafeLoader with YAML 1.2 booleans (only true/false: ``off``, ``no``, ``on``, ``yes`` stay strings,
-    so a key ``off`` is not silently ``False``) and duplicate keys as errors (PyYAML keeps the last one)."""
+    so a key ``off`` is not silently ``False``), duplicate keys as errors (PyYAML keeps the last one),
+    and no aliases: ``*name`` repeats a node by reference, so nine levels of nine aliases make a
+    document of a few hundred bytes that expands to 9⁹ nodes for every check after parsing (the
+    "billion laughs"); a config has nothing to gain from them."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.events.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(None, None, f"alias *{event.anchor} found; aliases (and anchors "
+                                              "&name) are not supported in a config: write the value out",
+                                              event.start_mark)
+        return super().compose_node(parent, index)
 
 
 _Loader.yaml_implicit_resolvers = {
     k: [(tag, rx) for tag, rx in v if tag != "tag:yaml.org,2002:bool"]
     for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-_BOOL12 = __import__("re").compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+_BOOL12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
 for _first in "tTfF":
     _Loader.yaml_implicit_resolvers.setdefault(_first, []).insert(0, ("tag:yaml.org,2002:bool", _BOOL12))
 

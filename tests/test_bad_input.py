@@ -53,7 +53,24 @@ CONFIG_CASES = {
     "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
     # the key path only: no pydantic validator tags ("dict[str,union[...]]") between the keys
     "initial_not_a_number": (("model.initial", {"x": "foo", "v": 0.0}), "error: {cfg}: model.initial.x: expected a number"),
+    # a leading "." made a hidden run folder that readers skip and a later run's cleanup could take
+    "hidden_name": (("name", ".a.tmp-999999"), "name: expected letters, digits"),
+    # a degree of 10**6 hung; unknown keys of poly were accepted
+    "poly_degree_huge": (("structures", {"equation": "v", "known": "u", "library": {"poly": {"vars": ["x"],
+                          "degree": 1000000}}}), "structures.library.poly.degree"),
+    "poly_unknown_key": (("structures", {"equation": "v", "known": "u", "library": {"poly": {"vars": ["x"],
+                          "bogus": 1}}}), "structures.library.poly.bogus: unknown key"),
 }
+
+
+def test_yaml_aliases_are_refused_before_they_expand(tmp_path, capsys):
+    """Nine levels of nine aliases: a few hundred bytes that expand to 9**9 nodes (ran > 120 s)."""
+    lines = ['a: &a ["x","x","x","x","x","x","x","x","x"]']
+    for i, (p, q) in enumerate(zip("abcdefgh", "bcdefghi")):
+        lines.append(f"{q}: &{q} [" + ",".join(f"*{p}" for _ in range(9)) + "]")
+    (tmp_path / "c.yaml").write_text("\n".join(lines) + "\n" + yaml.safe_dump(GOOD))
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    _expect_exit2(tmp_path, capsys, "aliases (and anchors &name) are not supported")
 
 
 @pytest.mark.parametrize("case", list(CONFIG_CASES))
