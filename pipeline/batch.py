@@ -27,7 +27,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from . import progress
+from . import progress, runfolder
 from .errors import InputError
 
 EXECUTORS = ("local", "dask")
@@ -126,8 +126,11 @@ def run_batch(configs: list[str], *, jobs: int = 2, executor: str = "local", sch
     if not configs:
         raise InputError("no config given", key="CONFIG")
     configs = [os.path.abspath(c) for c in _unique(configs)]
-    root = os.path.abspath(str(root))
-    Path(root).mkdir(parents=True, exist_ok=True)
+    root = str(runfolder.check_new_path(root, key="--root", folder=True))
+    try:
+        Path(root).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{root}: cannot create the folder: {exc.strerror}", key="--root") from None
     results: dict[int, BatchResult] = {}
     fn = partial(run_one, root=root, html=html)
     with progress.stage("batch", total=len(configs)):

@@ -81,8 +81,8 @@ def kill_point(point: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
-def _err(target: Path | str, what: str) -> InputError:
-    return InputError(f"{target}: {what}", key="--out")
+def _err(target: Path | str, what: str, key: str = "--out") -> InputError:
+    return InputError(f"{target}: {what}", key=key)
 
 
 # ---------------------------------------------------------------- recognising run folders
@@ -312,6 +312,37 @@ def _check_parent(target: Path, shown: str, *, default: bool) -> None:
         os.rmdir(probe)
     except OSError as exc:
         raise _err(shown, f"cannot create a folder in {parent}: {exc.strerror}") from None
+
+
+def check_new_path(path: Path | str, *, key: str, folder: bool) -> Path:
+    """A file or folder a command creates itself (a gradebook, a batch root, an assignment folder),
+    checked before any work: not on /proc, /sys, /dev or another pseudo filesystem; an existing one is
+    of the right kind (a folder when ``folder``, else a regular file; never a symlink); its parent is a
+    folder (created when missing, if its nearest existing ancestor is a writable folder). Returns it
+    resolved; raises :class:`InputError` naming ``key``. Whether an existing one may be replaced is
+    the caller's decision."""
+    shown = str(path)
+    if not shown or "\0" in shown:
+        raise InputError(f"{shown!r} is not a usable path", key=key)
+    try:
+        resolved = resolve_target(Path(path))
+        _check_location(resolved, shown)
+        _check_parent(resolved, shown, default=True)
+        st = os.lstat(resolved)
+    except FileNotFoundError:
+        return resolved
+    except InputError as exc:
+        raise InputError(str(exc).split(": ", 1)[-1], key=key) from None
+    except OSError as exc:
+        raise InputError(f"{shown}: cannot use this path: {exc.strerror}", key=key) from None
+    if stat.S_ISLNK(st.st_mode):
+        raise InputError(f"{shown}: is a symlink; expected a {'folder' if folder else 'file'} path, not a link",
+                         key=key)
+    if folder and not stat.S_ISDIR(st.st_mode):
+        raise InputError(f"{shown}: exists and is not a folder", key=key)
+    if not folder and not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{shown}: exists and is not a regular file", key=key)
+    return resolved
 
 
 def _check_existing(target: Path, shown: str) -> None:

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from . import store
+from .errors import InputError
 
 
 def register(sub) -> dict:
@@ -47,8 +48,19 @@ def register(sub) -> dict:
     return {"runs": cmd_runs, "compare": cmd_compare, "batch": cmd_batch, "track": cmd_track}
 
 
+def _existing_root(root: str) -> Path:
+    """--root of a command that reads run folders: an existing folder (a typo listed "no runs")."""
+    p = Path(root)
+    if not p.is_dir():
+        raise InputError(f"{root}: {'is not a folder' if p.exists() else 'no such folder'}; expected the folder "
+                         "holding the run folders", key="--root")
+    return p
+
+
 def cmd_runs(a: argparse.Namespace) -> int:
     key = ("-" + a.sort.lstrip("-") if a.desc else a.sort) if a.sort else None
+    if a.root != str(store.DEFAULT_ROOT):
+        _existing_root(a.root)
     runs = store.sort_runs(store.filter_runs(store.list_runs(Path(a.root)), a.where), key)
     if a.json:
         print(json.dumps([r.row() | {"path": str(r.path)} for r in runs], indent=2))
@@ -76,6 +88,10 @@ def cmd_track(a: argparse.Namespace) -> int:
 
 def cmd_batch(a: argparse.Namespace) -> int:
     from .batch import exit_code, run_batch
+    if a.track:
+        from .tracking.mlflow_backend import _import_mlflow, check_uri
+        check_uri(a.track, key="--track")
+        _import_mlflow()
     results = run_batch(a.configs, jobs=a.jobs, executor=a.executor, scheduler=a.scheduler, root=a.root,
                         html=a.html)
     if a.track:

@@ -30,9 +30,16 @@ def _make(args: argparse.Namespace) -> int:
 def _grade(args: argparse.Namespace) -> int:
     from .grade import HEADER, check_writable, grade, gradebook_csv
     from .summary import FIRST_LINE, render_summary
+    from ..runfolder import check_new_path
+    if args.jobs < 1:
+        raise InputError(f"expected a positive number of parallel workers, got {args.jobs}", key="--jobs")
     out = Path(args.out)
     runs = Path(args.runs) if args.runs else out.parent / "runs"
     page = Path(args.html) if args.html else out.parent / "summary.html"
+    # where the results go, checked before any submission runs (a /proc path failed after grading)
+    check_new_path(out, key="--out", folder=False)
+    check_new_path(page, key="--html", folder=False)
+    check_new_path(runs, key="--runs" if args.runs else "--out (its runs/ folder)", folder=True)
     if out.resolve() == page.resolve():
         raise InputError("the gradebook and the summary page must be different files", key="--html")
     check_writable(out, HEADER, "--out")

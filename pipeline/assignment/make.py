@@ -18,24 +18,25 @@ Layout of ``--out DIR`` (the key and the held-out part are outside the student f
     DIR/students/<id>/config.yaml       the starter config: the nominal model, no hint
     DIR/students/<id>/README.md         the instructions, the same for every student
 
-File names, CSV headers and configs are the same for every student whatever the effect. ``DIR`` must
-not exist, be empty, or be an earlier output of this command (recognised by its key.json), which is
-then replaced.
+File names, CSV headers and configs are the same for every student whatever the effect. ``DIR`` is
+written as a run folder is (:mod:`pipeline.runfolder`): checked before any work (not the current
+folder or an ancestor, not a symlink, a file or a pseudo filesystem), written into a hidden temp folder
+beside it, marked complete by ``.sysid-run`` (every file with its size and sha256) and renamed into
+place. It must not exist, be empty, or be an earlier output of this command holding exactly the files
+its marker lists, unchanged; then it is replaced. A folder with anything else in it (the instructor's
+notes, the students' submissions, an edited key) is refused and left as it is.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
-import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from .. import synthetic
+from .. import runfolder, synthetic
 from ..data import file_sha256
 from ..errors import InputError
 from ..jsonutil import dumps
@@ -119,14 +120,6 @@ def make_student(tpl: Template, seed: int, st: Student, out: Path) -> dict:
     }
 
 
-def is_own_output(out: Path) -> bool:
-    """True when ``out`` holds a key.json written by this command."""
-    try:
-        return json.loads((out / "key.json").read_text(encoding="utf-8")).get("schema") == KEY_SCHEMA
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
 def make_assignment(roster_path: str | Path, template_path: str | Path, out: str | Path,
                     seed: int | None = None) -> Path:
     """Generate the class; returns the path of key.json. InputError for a bad roster, template or --out."""
@@ -135,21 +128,17 @@ def make_assignment(roster_path: str | Path, template_path: str | Path, out: str
     seed = tpl.seed if seed is None else seed
     if seed < 0:
         raise InputError(f"the seed must be a non-negative integer, got {seed}", key="--seed")
-    out = Path(out)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not is_own_output(out))):
-        raise InputError("exists and is not empty or an earlier assignment output; choose a new folder",
-                         file=str(out), key="--out")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    target = runfolder.check_target(out, inputs=[Path(roster_path), Path(template_path)], default=True)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = runfolder.make_temp(target)
     try:
         entries = [make_student(tpl, seed, st, tmp) for st in students]
         key = {"schema": KEY_SCHEMA, "assignment": tpl.name, "seed": seed,
                "template": tpl.model_dump(mode="json"), "students": entries}
         (tmp / "key.json").write_text(dumps(key), encoding="utf-8")
-        if out.exists():
-            shutil.rmtree(out) if any(out.iterdir()) else out.rmdir()
-        os.replace(tmp, out)
+        runfolder.finalize(tmp, f"assignment-{tpl.name}")
+        runfolder.publish(tmp, target)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return out / "key.json"
+    return Path(out) / "key.json"

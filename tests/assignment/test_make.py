@@ -183,3 +183,38 @@ def test_cli_subprocess_bad_instructor_input_contract(tmp_path):
                   "--out", str(tmp_path / "g.csv"))
     assert_bad_input(res, "nokey.json", "key not found")
     assert snapshot(tmp_path) == before
+
+
+def test_an_earlier_output_is_replaced_only_while_it_holds_just_its_own_files(tmp_path, capsys, monkeypatch):
+    """An independent probe: with one of its key.json files inside, --out DIR was emptied whatever else
+    it held (the instructor's notes, the submissions), and --out . emptied the working folder."""
+    out = tmp_path / "class"
+    args = ["assignment", "make", "--roster", str(ROSTER), "--template", str(TEMPLATE), "--out", str(out)]
+    assert _cli(capsys, *args)[0] == 0
+    assert _cli(capsys, *args)[0] == 0                      # its own output: replaced
+    (out / "notes.txt").write_text("grading notes")
+    (out / "submissions" / "s01").mkdir(parents=True)
+    (out / "submissions" / "s01" / "answer.yaml").write_text("mine")
+    rc, err = _cli(capsys, *args)
+    assert rc == 2 and "--out" in err and "did not write" in err
+    assert (out / "notes.txt").read_text() == "grading notes"
+    assert (out / "submissions" / "s01" / "answer.yaml").read_text() == "mine"
+    # the working folder holding a copy of the key: refused as the current folder, nothing removed
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "key.json").write_bytes((out / "key.json").read_bytes())
+    (work / "thesis.txt").write_text("my thesis")
+    monkeypatch.chdir(work)
+    rc, err = _cli(capsys, "assignment", "make", "--roster", str(ROSTER), "--template", str(TEMPLATE), "--out", ".")
+    assert rc == 2 and "current folder" in err
+    assert sorted(p.name for p in work.iterdir()) == ["key.json", "thesis.txt"]
+
+
+def test_an_edited_key_is_not_overwritten(tmp_path, capsys):
+    out = tmp_path / "class"
+    args = ["assignment", "make", "--roster", str(ROSTER), "--template", str(TEMPLATE), "--out", str(out)]
+    assert _cli(capsys, *args)[0] == 0
+    key = (out / "key.json").read_text()
+    (out / "key.json").write_text(key.replace('"', "'", 1))  # same size, other content
+    rc, err = _cli(capsys, *args)
+    assert rc == 2 and (out / "key.json").read_text() != key
