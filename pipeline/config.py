@@ -88,6 +88,16 @@ class _ReadCfg(_Strict):
     def _distinct_columns(cls, v):
         return _unique_targets(v)
 
+    @field_validator("comment", "delimiter")
+    @classmethod
+    def _not_part_of_a_number(cls, v):
+        # a comment character cuts every line at its first occurrence: a digit, sign, point or exponent
+        # letter would cut numbers apart
+        if v is not None and (v in "0123456789+-.eE" or v.isspace() and v not in "\t "):
+            raise ValueError(f"{v!r} can be part of a number; expected a character that is not a digit, "
+                             "sign, '.', 'e' or 'E'")
+        return v
+
 
 class ExperimentCfg(_ReadCfg):
     """A separate record (contract §4): keys left out are taken from ``data`` (``time`` and

@@ -99,6 +99,9 @@ class Split:
         return slice(*self.val)
 
 
+MAX_MAGNITUDE = 1e75   # |values| above this overflow the 4th powers (kurtosis, HAC bandwidths)
+
+
 def file_sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -231,8 +234,14 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         v = cols[name]
         bad = np.flatnonzero(~np.isfinite(v))
         if len(bad):
-            raise DataError(f"column {name!r} has {len(bad)} NaN/inf value(s), first at row {bad[0]}; "
-                            "clean or interpolate the record first", file=f, key=key)
+            raise DataError(f"column {name!r} has {len(bad)} NaN/inf value(s), first at row {bad[0]} (data "
+                            "rows counted from 0; an empty or missing cell counts too); clean or interpolate "
+                            "the record first", file=f, key=key)
+        big = float(np.max(np.abs(v))) if len(v) else 0.0
+        if big > MAX_MAGNITUDE:
+            raise DataError(f"column {name!r} holds values up to {big:.3g} in magnitude; the statistics raise "
+                            f"residuals to the 4th power, which overflows a float beyond {MAX_MAGNITUDE:.0e}: "
+                            "rescale the column (e.g. other units)", file=f, key=key)
         return v
 
     ins = {model: column(c) for c, model in src.input_map.items()}

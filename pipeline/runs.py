@@ -284,6 +284,10 @@ def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = 
     to MLflow when ``track`` is a tracking URI."""
     lc = load_config(config_path)
     inputs = input_paths(lc)
+    if track:   # a bad URI or a missing MLflow fails now, not after the analysis and the run folder
+        from .tracking.mlflow_backend import _import_mlflow, check_uri
+        track = check_uri(track, key="--track")
+        _import_mlflow()
     if out is not None:
         check_target(out, inputs=inputs, default=False)   # "" is refused, not taken as the default
     else:  # the run id follows from the two hashes: check reports/<run-id> now (the data is read later)

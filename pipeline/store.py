@@ -63,6 +63,9 @@ class RunInfo:
                 cfg = {}
         if not isinstance(summary, dict) or not isinstance(manifest, dict):
             raise InputError("summary.json / manifest.json is not a JSON object", file=str(path))
+        bad = _layout_problem(summary)
+        if bad:
+            raise InputError(f"summary.json does not have this tool's layout: {bad}", file=str(path))
         return cls(path, summary, manifest, cfg if isinstance(cfg, dict) else {})
 
     @property
@@ -100,6 +103,28 @@ class RunInfo:
         if key.startswith("metrics."):
             return _lookup(dvc_metrics(self.summary), key[len("metrics."):])
         return _lookup(self.summary, key)
+
+
+def _layout_problem(summary: dict) -> str | None:
+    """What in ``summary`` is not shaped as the table and comparisons read it (a folder edited by hand
+    or written by another tool), or None."""
+    diag = summary.get("diagnosis")
+    if diag is not None and not isinstance(diag, dict):
+        return "diagnosis is not an object"
+    findings = (diag or {}).get("findings")
+    if findings is not None and (not isinstance(findings, list) or not all(isinstance(f, dict) for f in findings)):
+        return "diagnosis.findings is not a list of objects"
+    for f in findings or []:
+        if f.get("gain") is not None and not isinstance(f["gain"], dict):
+            return "a finding's gain is not an object"
+    for block in ("nominal", "final"):
+        b = summary.get(block)
+        if b is not None and (not isinstance(b, dict) or not isinstance(b.get("validation") or {}, dict)
+                              or not isinstance(b.get("params") or {}, dict)):
+            return f"{block} is not an object with validation and params objects"
+    if summary.get("models") is not None and not isinstance(summary["models"], list):
+        return "models is not a list"
+    return None
 
 
 def _lookup(tree: Any, dotted: str) -> Any:

@@ -53,6 +53,8 @@ CONFIG_CASES = {
     "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
     # the key path only: no pydantic validator tags ("dict[str,union[...]]") between the keys
     "initial_not_a_number": (("model.initial", {"x": "foo", "v": 0.0}), "error: {cfg}: model.initial.x: expected a number"),
+    # a comment character cuts each line at its first occurrence: a digit cut the numbers apart
+    "comment_digit": (("data.comment", "0"), "data.comment: '0' can be part of a number"),
     # a leading "." made a hidden run folder that readers skip and a later run's cleanup could take
     "hidden_name": (("name", ".a.tmp-999999"), "name: expected letters, digits"),
     # a degree of 10**6 hung; unknown keys of poly were accepted

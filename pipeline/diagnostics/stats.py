@@ -183,6 +183,11 @@ def andrews_bandwidth(g: np.ndarray) -> int:
     α̂(1) = Σ 4ρ²σ⁴/((1−ρ)⁶(1+ρ)²) / Σ σ⁴/(1−ρ)⁴ over the columns, S = 1.1447 (α̂(1) N)^{1/3}."""
     g = np.atleast_2d(g.T).T
     n = g.shape[0]
+    # the ratio is invariant to a common scale of the columns, but σ⁴ of squared residuals of order
+    # 1e50 overflows a float: such input is rescaled (others are left bit for bit as they were)
+    big = float(np.max(np.abs(g))) if g.size else 0.0
+    if np.isfinite(big) and big > 1e50:
+        g = g / big
     num = den = 0.0
     for a in range(g.shape[1]):
         x = g[:, a] - g[:, a].mean()

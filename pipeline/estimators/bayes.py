@@ -33,8 +33,12 @@ class GaussianPrior:
     cov: object
 
     def arrays(self, p):
-        m = np.broadcast_to(np.asarray(self.mean, dtype=float), (p,)).copy()
-        c = np.asarray(self.cov, dtype=float)
+        m, c = np.asarray(self.mean, dtype=float), np.asarray(self.cov, dtype=float)
+        for what, v in (("mean", m), ("variance", c)):
+            if v.ndim == 1 and v.size not in (1, p):
+                raise EstimationError(f"prior {what}: {v.size} values for {p} parameters; expected one value "
+                                      f"or {p} (one per parameter, in the order of the structure's terms)")
+        m = np.broadcast_to(m, (p,)).copy()
         c = np.diag(np.broadcast_to(c, (p,))) if c.ndim <= 1 else c
         if c.shape != (p, p) or not np.all(np.isfinite(c)) or not np.all(np.isfinite(m)):
             raise EstimationError(f"improper prior: Gaussian prior needs a finite mean and a finite ({p}, {p}) "

@@ -110,8 +110,10 @@ def read_csv(path: Path, spec: ReadSpec, needed: dict[str, str], time: str | Non
         if len(positions[name]) > 1:
             raise msg.duplicated(name, positions[name], f, key)
     cols = {name: positions[name][0] for name in needed}
+    # every row is read against the header's fields (pandas would take their number from the first
+    # data row: a short first row failed inside pandas); a longer row is a parser error naming its line
     return _convert(path, f, key, spec, cols, time, sep=delim, skiprows=line_no + 1,
-                    usecols=sorted(set(cols.values())))
+                    names=list(range(len(header))), usecols=sorted(set(cols.values())), index_col=False)
 
 
 def read_table(path: Path, spec: ReadSpec, needed: dict[str, str], time: str | None,

@@ -49,11 +49,42 @@ def _import_mlflow():
     return MlflowClient
 
 
+URI_SCHEMES = ("sqlite", "file", "http", "https", "databricks")
+
+
+def check_uri(uri: str | None, key: str = "--uri") -> str:
+    """The tracking URI, checked before any work (a bad one failed inside MLflow after the analysis):
+    ``None``/``"default"`` is the default sqlite store; otherwise ``sqlite:///FILE`` (FILE's folder
+    is checked like an output path), ``file:///FOLDER`` or a plain folder path, ``http(s)://HOST``,
+    ``databricks``. InputError naming ``key`` otherwise."""
+    from ..runfolder import check_new_path
+    uri = DEFAULT_TRACKING_URI if uri in (None, "", "default") else uri
+    scheme = uri.split("://", 1)[0] if "://" in uri else ("databricks" if uri == "databricks" else "")
+    if scheme == "sqlite":
+        if not uri.startswith("sqlite:///") or len(uri) == len("sqlite:///"):
+            raise InputError(f"{uri!r}: expected sqlite:///PATH/TO/FILE.db", key=key)
+        check_new_path(uri[len("sqlite:///"):], key=key, folder=False)
+    elif scheme == "file":
+        check_new_path(uri[len("file://"):], key=key, folder=True)
+    elif scheme in ("http", "https"):
+        if not uri.split("://", 1)[1].strip("/"):
+            raise InputError(f"{uri!r}: expected {scheme}://HOST[:PORT]", key=key)
+    elif scheme == "":
+        check_new_path(uri, key=key, folder=True)       # a plain path: MLflow's file store
+    elif scheme != "databricks":
+        raise InputError(f"{uri!r}: unknown tracking URI scheme {scheme!r}; expected one of "
+                         f"{', '.join(URI_SCHEMES)} (e.g. sqlite:///reports/mlruns.db)", key=key)
+    return uri
+
+
 def resolve_uri(uri: str | None) -> str:
     """``None``/``"default"`` → the default sqlite store; a sqlite file's folder is created."""
-    uri = DEFAULT_TRACKING_URI if uri in (None, "", "default") else uri
+    uri = check_uri(uri)
     if uri.startswith("sqlite:///"):
-        Path(uri[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+        try:
+            Path(uri[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"{uri}: cannot create the folder of the database: {exc.strerror}", key="--uri") from None
     return uri
 
 
@@ -104,6 +135,26 @@ def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str
     except (OSError, ValueError, yaml.YAMLError) as exc:
         raise InputError(f"not a complete run folder ({exc})", file=str(folder)) from None
     uri = resolve_uri(tracking_uri)
+    if not experiment or not experiment.strip():
+        raise InputError("expected a non-empty experiment name", key="--experiment")
+    try:
+        return _log(MlflowClient, Metric, Param, RunTag, folder, summary, manifest, config, uri, experiment)
+    except InputError:
+        raise
+    except Exception as exc:   # the tracking store failed (unreachable, locked, refused): not the analysis
+        if not _from_tracking_store(exc):
+            raise
+        raise InputError(f"MLflow could not log the run to {uri}: {type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0][:300] if str(exc) else ''}", key="--uri") from None
+
+
+def _from_tracking_store(exc: BaseException) -> bool:
+    """Is ``exc`` the tracking store's own failure (MLflow, SQLAlchemy, the network, the disk)?"""
+    mod = type(exc).__module__ or ""
+    return isinstance(exc, OSError) or mod.split(".")[0] in ("mlflow", "sqlalchemy", "requests", "urllib3")
+
+
+def _log(MlflowClient, Metric, Param, RunTag, folder, summary, manifest, config, uri, experiment) -> str:
     client = MlflowClient(tracking_uri=uri)
     exp = client.get_experiment_by_name(experiment)
     exp_id = exp.experiment_id if exp else client.create_experiment(experiment, artifact_location=_artifact_location(uri))
