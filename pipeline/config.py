@@ -558,6 +558,11 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     if cfg.data.time is None and cfg.data.sample_time is None:
         raise ConfigError("give either data.time (a column) or data.sample_time (seconds)",
                           file=f, key="data")
+    named = set(m.states) | set(m.inputs) | set(m.outputs) | set(imap) | set(omap)
+    for sig in cfg.units:
+        if sig not in named:
+            raise ConfigError(f"{sig!r} is not a signal of this config; expected one of "
+                              f"{', '.join(sorted(named))}", file=f, key=f"units.{sig}")
     if cfg.data.time is not None and cfg.data.sample_time is not None:
         raise ConfigError("give data.time or data.sample_time, not both", file=f, key="data")
     s = cfg.split

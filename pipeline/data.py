@@ -255,7 +255,7 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         if np.any(d <= 0):
             i = int(np.flatnonzero(d <= 0)[0]) + 1
             raise DataError(f"time column {src.time!r} is not strictly increasing at row {i} "
-                            f"({t[i - 1]!r} then {t[i]!r})", file=f, key=key)
+                            f"({float(t[i - 1]):.10g} then {float(t[i]):.10g})", file=f, key=key)
         dt = float(np.median(d))
         jitter = max(float(d.max()) - dt, dt - float(d.min())) / dt   # max |d - dt| / dt, no temporaries
         if not np.isfinite(dt) or not np.isfinite(jitter):
@@ -264,8 +264,8 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         if jitter > dc.max_jitter:
             i = int(np.argmax(np.abs(d - dt)))
             raise DataError(f"non-uniform sampling: interval at row {i + 1} is {d[i]:.6g} s against a median "
-                            f"of {dt:.6g} s ({100 * jitter:.2f} % off; data.max_jitter allows "
-                            f"{100 * dc.max_jitter:.2f} %); resample the record first", file=f, key=key)
+                            f"of {dt:.6g} s ({100 * jitter:.3g} % off; data.max_jitter allows "
+                            f"{100 * dc.max_jitter:.3g} %); resample the record first", file=f, key=key)
         if jitter > 1e-6:
             log.append(f"sampling jitter up to {100 * jitter:.3g} % accepted; median dt = {dt:.6g} s used")
     else:
@@ -279,7 +279,7 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
 def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | None, where: str = "") -> None:
     for name, u in ins.items():
         if np.ptp(u[rows]) == 0:
-            raise DataError(f"input {name!r} is constant{where} ({u[rows][0]!r}); a constant input excites "
+            raise DataError(f"input {name!r} is constant{where} ({float(u[rows][0]):.10g}); a constant input excites "
                             "nothing", file=f, key=key)
 
 
@@ -335,8 +335,12 @@ def make_split(lc: LoadedConfig, rec: "Record | int") -> Split:
         val = [g for g in rec.segments if g.role == "validation"]
         return Split((est[0].start, est[-1].stop), (val[0].start, val[-1].stop))
     if s.estimation is not None:
-        est = (s.estimation[0], n if s.estimation[1] is None else min(s.estimation[1], n))
-        val = (s.validation[0], n if s.validation[1] is None else min(s.validation[1], n))
+        for key, rng in (("split.estimation", s.estimation), ("split.validation", s.validation)):
+            if rng is not None and rng[1] is not None and rng[1] > n:
+                raise DataError(f"range [{rng[0]}, {rng[1]}) ends past the record's {n} samples; give null as "
+                                "the end for 'to the end of the record'", file=f, key=key)
+        est = (s.estimation[0], n if s.estimation[1] is None else s.estimation[1])
+        val = (s.validation[0], n if s.validation[1] is None else s.validation[1])
         for key, (a, b) in (("split.estimation", est), ("split.validation", val)):
             if a >= n or b - a < 10:
                 raise DataError(f"range [{a}, {b}) holds fewer than 10 of the record's {n} samples",

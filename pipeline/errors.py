@@ -10,6 +10,7 @@ class InputError(Exception):
     def __init__(self, message: str, *, file: str | None = None, key: str | None = None):
         self.file = file
         self.key = key
+        self.message = message
         where = ""
         if file and key:
             where = f"{file}: {key}: "
@@ -38,3 +39,14 @@ class EstimationError(InputError):
 
 class RefitAbandoned(EstimationError):
     """A refit whose error stayed above the model it extends for its whole simulation budget."""
+
+
+def in_file(exc: InputError, file: str, key: str | None = None) -> InputError:
+    """``exc`` naming ``file`` (and ``key`` before its own key, e.g. "structures" + "window") when it
+    names no file: raised deep in a stage that does not know which config it serves. Same class."""
+    if exc.file:
+        return exc
+    k = ".".join(p for p in (key, exc.key) if p) or None
+    new = type(exc)(exc.message, file=file, key=k)
+    new.__dict__.update({a: v for a, v in exc.__dict__.items() if a not in ("file", "key", "message")})
+    return new

@@ -29,6 +29,7 @@ raise :class:`~pipeline.errors.InputError` naming the option and its allowed ran
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -62,30 +63,32 @@ __all__ = [
 def _signal(x, name: str = "x", min_len: int = 2) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     if x.ndim != 1:
-        raise InputError(f"{name}: expected a 1-D signal, got an array of shape {x.shape}", key=name)
+        raise InputError(f"expected a 1-D signal, got an array of shape {x.shape}", key=name)
     if x.size < min_len:
-        raise InputError(f"{name}: expected at least {min_len} samples, got {x.size}", key=name)
+        raise InputError(f"expected at least {min_len} samples, got {x.size}", key=name)
     if not np.all(np.isfinite(x)):
-        raise InputError(f"{name}: expected finite samples, found NaN or inf", key=name)
+        raise InputError(f"expected finite samples, found NaN or inf", key=name)
     return x
 
 
 def _positive(value, name: str) -> float:
+    if isinstance(value, bool):     # float(True) is 1.0: a YAML `true` is not a number
+        raise InputError(f"expected a positive number, got {value!r}", key=name)
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"{name}: expected a positive number, got {value!r}", key=name) from None
+        raise InputError(f"expected a positive number, got {value!r}", key=name) from None
     if not np.isfinite(v) or v <= 0:
-        raise InputError(f"{name}: expected a positive number (> 0), got {value!r}", key=name)
+        raise InputError(f"expected a positive number (> 0), got {value!r}", key=name)
     return v
 
 
 def _order(value, name: str = "order", max_value: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         rng = f"[1, {max_value}]" if max_value else ">= 1"
-        raise InputError(f"{name}: expected a positive integer {rng}, got {value!r}", key=name)
+        raise InputError(f"expected a positive integer {rng}, got {value!r}", key=name)
     if max_value is not None and value > max_value:
-        raise InputError(f"{name}: expected a positive integer in [1, {max_value}], got {value!r}", key=name)
+        raise InputError(f"expected a positive integer in [1, {max_value}], got {value!r}", key=name)
     return int(value)
 
 
@@ -93,7 +96,7 @@ def _below_nyquist(freq, fs: float, name: str) -> float:
     f = _positive(freq, name)
     nyq = fs / 2.0
     if f >= nyq:
-        raise InputError(f"{name}: expected a frequency in (0, {nyq:g}) Hz (below Nyquist fs/2), got {freq!r}", key=name)
+        raise InputError(f"expected a frequency in (0, {nyq:g}) Hz (below Nyquist fs/2), got {freq!r}", key=name)
     return f
 
 
@@ -156,7 +159,7 @@ def state_variable_filter(x, dt: float, order: int, omega_c: float) -> np.ndarra
     omega_c = _positive(omega_c, "omega_c")
     dt = _positive(dt, "dt")
     if omega_c >= np.pi / dt:
-        raise InputError(f"omega_c: expected a frequency in (0, {np.pi / dt:g}) rad/s (below Nyquist), got {omega_c!r}", key="omega_c")
+        raise InputError(f"expected a frequency in (0, {np.pi / dt:g}) rad/s (below Nyquist), got {omega_c!r}", key="omega_c")
     den = np.poly1d([1.0 / omega_c, 1.0]) ** order
     out = np.empty((order + 1, np.asarray(x).size))
     for k in range(order + 1):
@@ -175,7 +178,7 @@ def notch_coefficients(omega0: float, xi: float, dt: float):
     omega0 = _positive(omega0, "omega0")
     nyq = np.pi / dt
     if omega0 >= nyq:
-        raise InputError(f"omega0: expected a frequency in (0, {nyq:g}) rad/s (below Nyquist pi/dt), got {omega0!r}", key="omega0")
+        raise InputError(f"expected a frequency in (0, {nyq:g}) rad/s (below Nyquist pi/dt), got {omega0!r}", key="omega0")
     xi = _positive(xi, "xi")
     K = omega0 / np.tan(omega0 * dt / 2.0)
     w2 = omega0**2
@@ -193,7 +196,7 @@ def notch(x, dt: float, omega0: float, xi: float = 0.7, zero_phase: bool = False
     b, a = notch_coefficients(omega0, xi, dt)
     if zero_phase:
         if x.size <= 9:
-            raise InputError(f"x: zero-phase notch needs more than 9 samples, got {x.size}", key="x")
+            raise InputError(f"zero-phase notch needs more than 9 samples, got {x.size}", key="x")
         return signal.filtfilt(b, a, x)
     return signal.lfilter(b, a, x)
 
@@ -227,13 +230,13 @@ def decimate(x, q: int, ftype: str = "iir", order: int | None = None) -> np.ndar
     x = _signal(x)
     q = _order(q, "q")
     if ftype not in ("iir", "fir"):
-        raise InputError(f"ftype: expected 'iir' or 'fir', got {ftype!r}", key="ftype")
+        raise InputError(f"expected 'iir' or 'fir', got {ftype!r}", key="ftype")
     if order is not None:
         order = _order(order, "order", 30)
     n_taps = (order if order is not None else (20 * q if ftype == "fir" else 8)) + 1
     need = 3 * n_taps if ftype == "fir" else 3 * (2 * (n_taps // 2) + 1) + 1
     if x.size <= need:
-        raise InputError(f"x: decimation by {q} ({ftype}) needs more than {need} samples, got {x.size}", key="x")
+        raise InputError(f"decimation by {q} ({ftype}) needs more than {need} samples, got {x.size}", key="x")
     return signal.decimate(x, q, n=order, ftype=ftype, zero_phase=True)
 
 
@@ -320,15 +323,15 @@ def derivative(x, dt: float, method: str = "fd", *, window: int = 11, polyorder:
     elif method == "savgol":
         window = _order(window, "window")
         if window > x.size:
-            raise InputError(f"window: expected an odd integer in [{polyorder + 1}, {x.size}] (signal length), got {window}", key="window")
+            raise InputError(f"expected an odd integer in [{polyorder + 1}, {x.size}] (signal length), got {window}", key="window")
         if window % 2 == 0:
-            raise InputError(f"window: expected an odd integer, got {window}", key="window")
+            raise InputError(f"expected an odd integer, got {window}", key="window")
         if not isinstance(polyorder, (int, np.integer)) or polyorder < 1 or polyorder >= window:
-            raise InputError(f"polyorder: expected an integer in [1, {window - 1}], got {polyorder!r}", key="polyorder")
+            raise InputError(f"expected an integer in [1, {window - 1}], got {polyorder!r}", key="polyorder")
         dx = signal.savgol_filter(x, window, polyorder, deriv=1, delta=dt)
     elif method == "spline":
         if x.size < 5:
-            raise InputError(f"x: smoothing spline needs at least 5 samples, got {x.size}", key="x")
+            raise InputError(f"smoothing spline needs at least 5 samples, got {x.size}", key="x")
         if lam is not None:
             lam = _positive(lam, "lam")
         t = np.arange(x.size) * dt
@@ -338,7 +341,7 @@ def derivative(x, dt: float, method: str = "fd", *, window: int = 11, polyorder:
         alpha = _positive(alpha, "alpha")
         dx = _tv_derivative(x, dt, alpha)
     else:
-        raise InputError(f"method: expected one of 'fd', 'savgol', 'spline', 'tv', got {method!r}", key="method")
+        raise InputError(f"expected one of 'fd', 'savgol', 'spline', 'tv', got {method!r}", key="method")
     _, _, msg = noise_amplification(x, dx, dt, hf_fraction_max)
     if msg and warn:
         warnings.warn(msg, stacklevel=2)
@@ -353,11 +356,11 @@ class PrefilterResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def _run_remove_mean(x, dt, **p):
+def _run_remove_mean(x, dt):
     return remove_mean(x), [], {}
 
 
-def _run_remove_trend(x, dt, **p):
+def _run_remove_trend(x, dt):
     return remove_trend(x), [], {}
 
 
@@ -413,8 +416,21 @@ class Prefilter:
         return {"name": self.name, "params": dict(self.params)}
 
     def apply(self, x, dt: float) -> PrefilterResult:
+        fn = _STEPS[self.name]
+        sig = inspect.signature(fn)
+        if not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+            known = [k for k in sig.parameters if k not in ("x", "dt")]
+            unknown = sorted(set(self.params) - set(known))
+            if unknown:
+                raise InputError(f"{self.name} has no parameter {', '.join(map(repr, unknown))}; expected "
+                                 f"{'params ' + ', '.join(known) if known else 'no params'}")
+            missing = [k for k in known if sig.parameters[k].default is inspect.Parameter.empty
+                       and k not in self.params]
+            if missing:
+                raise InputError(f"{self.name} needs params {', '.join(missing)} (e.g. params: "
+                                 f"{{{', '.join(f'{k}: ...' for k in missing)}}})")
         try:
-            y, warns, info = _STEPS[self.name](x, dt, **self.params)
+            y, warns, info = fn(x, dt, **self.params)
         except TypeError as exc:
-            raise InputError(f"params of prefilter {self.name!r}: {exc}", key="prefilter") from None
+            raise InputError(f"params of {self.name}: {exc}") from None
         return PrefilterResult(y=np.asarray(y), warnings=list(warns), info=info)

@@ -29,7 +29,7 @@ from . import __version__
 from .jsonutil import clean as _clean
 from .jsonutil import dumps
 from .config import LoadedConfig, implemented_families, load_config, noise_families
-from .errors import SimulationError
+from .errors import ConfigError, InputError, SimulationError, in_file
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
@@ -102,7 +102,23 @@ def input_paths(lc: LoadedConfig) -> list[Path]:
 
 
 def analyse(lc: LoadedConfig) -> RunContext:
+    """The whole analysis of a loaded config. An input error raised deep in a stage that names no file
+    is re-raised naming the config (and ``structures`` for the structure stage's own settings)."""
+    try:
+        return _analyse(lc)
+    except InputError as exc:
+        if exc.file:
+            raise
+        raise in_file(exc, str(lc.path)) from None
+
+
+def _analyse(lc: LoadedConfig) -> RunContext:
     rec = load_record(lc)
+    delay = lc.cfg.model.input_delay
+    span = rec.n * rec.dt
+    if delay and delay >= span:
+        raise ConfigError(f"{delay:g} s is not shorter than the record ({span:g} s): the model would never see "
+                          "the input", file=str(lc.path), key="model.input_delay")
     prefilter_log = (apply_prefilters(rec, lc.cfg.prefilter, str(lc.path), lc.cfg.data.min_samples)
                      if lc.cfg.prefilter else [])
     split = make_split(lc, rec)
@@ -121,7 +137,10 @@ def analyse(lc: LoadedConfig) -> RunContext:
     comparison = None
     if lc.cfg.structures is not None:
         from .compare import Comparer
-        comparison = Comparer(lc, rec, split, model).run()
+        try:
+            comparison = Comparer(lc, rec, split, model).run()
+        except InputError as exc:
+            raise in_file(exc, str(lc.path), "structures") from None
     cfg_sha = lc.sha256()
     run_id = run_id_of(lc, rec.sha256)
     summary = build_summary(lc, rec, prob, diag, run_id, cfg_sha)

@@ -53,6 +53,19 @@ CONFIG_CASES = {
     "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
     # the key path only: no pydantic validator tags ("dict[str,union[...]]") between the keys
     "initial_not_a_number": (("model.initial", {"x": "foo", "v": 0.0}), "error: {cfg}: model.initial.x: expected a number"),
+    # accepted before and ignored or clipped (an independent probe, 2026-12-04)
+    "units_unknown_signal": (("units", {"zz": "m"}), "units.zz: 'zz' is not a signal of this config"),
+    "split_past_the_end": (("split", {"estimation": [0, 200], "validation": [200, 99999]}),
+                           "split.validation: range [200, 99999) ends past the record's 400 samples"),
+    "input_delay_longer_than_record": (("model.input_delay", 1e6), "model.input_delay: 1e+06 s is not shorter"),
+    "ml_uniform_bounds_reversed": (("estimators", [{"ml": {"density": "uniform", "low": 1.0, "high": 0.0}}]),
+                                   "low (1) must be below high (0)"),
+    "prefilter_unknown_param": (("prefilter", [{"name": "remove_mean", "params": {"foo": True}}]),
+                                "prefilter[0]: remove_mean has no parameter 'foo'"),
+    "prefilter_missing_param": (("prefilter", [{"name": "lowpass", "params": {}}]),
+                                "prefilter[0]: lowpass needs params cutoff"),
+    "prefilter_bool_for_number": (("prefilter", [{"name": "notch", "params": {"omega0": True}}]),
+                                  "prefilter[0]: omega0: expected a positive number, got True"),
     # a comment character cuts each line at its first occurrence: a digit cut the numbers apart
     "comment_digit": (("data.comment", "0"), "data.comment: '0' can be part of a number"),
     # a leading "." made a hidden run folder that readers skip and a later run's cleanup could take
@@ -142,7 +155,7 @@ def test_bad_record(tmp_path, capsys, case):
 def test_nonuniform_message_says_by_how_much(tmp_path, capsys):
     _broken_record("nonuniform").to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
-    _expect_exit2(tmp_path, capsys, "(25.00 % off; data.max_jitter allows 1.00 %)")
+    _expect_exit2(tmp_path, capsys, "(25 % off; data.max_jitter allows 1 %)")
 
 
 def test_messages_name_the_file(tmp_path, capsys):

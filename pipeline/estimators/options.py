@@ -49,6 +49,15 @@ class MlOptions(_Opts):
     high: Finite | None = None
     mode: Finite | None = None
 
+    @model_validator(mode="after")
+    def _ordered_bounds(self):
+        if self.low is not None and self.high is not None and not self.low < self.high:
+            raise ValueError(f"low ({self.low:g}) must be below high ({self.high:g})")
+        if self.mode is not None and self.low is not None and self.high is not None \
+                and not self.low <= self.mode <= self.high:
+            raise ValueError(f"mode ({self.mode:g}) must lie in [low, high] = [{self.low:g}, {self.high:g}]")
+        return self
+
 
 PriorValue = Union[Finite, Annotated[list[Finite], Field(min_length=1, max_length=1000)]]
 PriorSd = Union[PositiveFinite, Annotated[list[PositiveFinite], Field(min_length=1, max_length=1000)]]
