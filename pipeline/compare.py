@@ -65,7 +65,9 @@ class StructureResult:
                 "n_params": len(self.terms) if self.theta is None else int(self.theta.size),
                 "energy": self.energy, **self.crit,
                 "cv_rmse_sim": self.cv_sim or None, "cv_mean": None if not self.cv_sim else self.cv_mean,
-                "cv_sd": None if len(self.cv_sim) < 2 else float(np.std(self.cv_sim, ddof=1)),
+                # a fold whose simulation diverged scores inf: no spread then (np.std warned on inf - inf)
+                "cv_sd": (None if len(self.cv_sim) < 2 or not np.all(np.isfinite(self.cv_sim))
+                          else float(np.std(self.cv_sim, ddof=1))),
                 "cv_rmse_one_step": self.cv_onestep or None, "validation_rmse_sim": self.val_rmse,
                 "error": self.error}
 

@@ -225,3 +225,15 @@ def test_takagi_sugeno_on_the_course_project_cv_chooses_a_middle_k(noise):
     sel = select_rules(x[:1400, None], (dx - df.u.to_numpy())[:1400], [2, 5, 11, 24], k=10, gap=10, seed=0)
     assert np.all(np.diff(sel["train_mse"]) < 0)
     assert sel["chosen"] not in (2, 24)
+
+
+def test_a_diverged_fold_gives_no_spread_and_no_numpy_warning():
+    import math
+    import warnings
+    from pipeline.compare import StructureResult
+    r = StructureResult("M", "ls", ["x"], cv_sim=[0.1, math.inf, 0.2])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")      # np.std of [.., inf, ..] warned "invalid value in subtract"
+        rec = r.record()
+    assert rec["cv_sd"] is None and rec["cv_mean"] == math.inf
+    assert StructureResult("M", "ls", ["x"], cv_sim=[0.1, 0.3]).record()["cv_sd"] == pytest.approx(0.1414213562)
