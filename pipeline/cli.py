@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import traceback
 
@@ -61,7 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # argparse: usage errors are bad input
         return 2 if exc.code else 0
     os.environ.setdefault("MPLBACKEND", "Agg")
+    from . import runfolder
     from .errors import InputError
+    prev = _remember_interrupts(runfolder)
     try:
         return handlers[args.cmd](args)
     except InputError as exc:
@@ -74,6 +77,25 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exc()
         print("internal error: please report it with the traceback above", file=sys.stderr)
         return 1
+    finally:
+        if prev is not None:
+            signal.signal(signal.SIGINT, prev)
+        runfolder.INTERRUPTED.clear()
+
+
+def _remember_interrupts(runfolder):
+    """On Ctrl-C, mark the process interrupted (``runfolder.INTERRUPTED``) before raising
+    KeyboardInterrupt as usual. Python drops an exception raised while a weakref or GC callback runs
+    ("Exception ignored in ..."), so an interrupt could be lost and the run publish a folder after all;
+    :func:`pipeline.runfolder.publish` checks the mark. Returns the previous handler (None off the main
+    thread, where signals cannot be handled)."""
+    def on_sigint(signum, frame):
+        runfolder.INTERRUPTED.set()
+        signal.default_int_handler(signum, frame)
+    try:
+        return signal.signal(signal.SIGINT, on_sigint)
+    except ValueError:
+        return None
 
 
 if __name__ == "__main__":

@@ -49,6 +49,7 @@ import secrets
 import shutil
 import signal
 import stat
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -59,6 +60,7 @@ TOOL = "sysid-pipeline"
 MARKER = ".sysid-run"
 MARKER_FORMAT = 2
 TMP_TOKEN = ".sysid-tmp"   # in a temp folder from its creation until finalize: this tool made it
+INTERRUPTED = threading.Event()   # set by the CLI's SIGINT handler: never publish after a Ctrl-C
 STALE_AGE_S = 86400.0
 KILL_POINTS = ("after_temp_created", "after_summary_written", "after_old_moved_aside",
                "after_new_renamed_in", "before_old_deleted")
@@ -564,6 +566,8 @@ def publish(tmp: Path, target: Path) -> Path:
     the new run renamed in, then the old one deleted. Anything else raises :class:`InputError` and
     leaves the target untouched (``tmp`` is removed)."""
     target = Path(target)
+    if INTERRUPTED.is_set():   # the KeyboardInterrupt itself may have been lost in a callback
+        raise KeyboardInterrupt
     with _publish_lock(target):
         try:
             st = os.lstat(target)
