@@ -872,9 +872,12 @@ class Diagnoser:
     def _gain_text(g: dict, dbic: float) -> str:
         what = ("pooled normalised validation free-run RMSE (each output over its standard deviation)"
                 if g.get("metric") == "validation_nrmse_sim_pooled" else "validation free-run RMSE")
+        def pct(x: float) -> str:   # -5e-6 read "-0.0": a sign with no digit to carry it
+            v = 100 * x
+            return f"{v:.2g}" if 0 < abs(v) < 0.05 else f"{v:.1f}"
         return (f"lowers the {what} from {g['before']:.4g} to {g['after']:.4g} "
-                f"({100 * g['relative']:.1f} % better, 95 % CI {100 * g['ci95'][0]:.1f} to "
-                f"{100 * g['ci95'][1]:.1f} % on this validation input"
+                f"({pct(g['relative'])} % better, 95 % CI {pct(g['ci95'][0])} to "
+                f"{pct(g['ci95'][1])} % on this validation input"
                 + (f"; one-sided p = {g['p_not_lower']:.2g} that it is not lower"
                    if "p_not_lower" in g else "") + f") and BIC by {-dbic:.1f}")
 

@@ -208,3 +208,12 @@ def test_figures_are_readable_sizes(demo_reports):
     for b64 in re.findall(r'src="data:image/png;base64,([^"]+)"', html):
         w, h = Image.open(io.BytesIO(base64.b64decode(b64))).size
         assert 250 <= w <= 1000 and h >= 150
+
+
+def test_a_finding_sentence_never_shows_a_bare_minus_zero():
+    """An intersample finding's interval [-5e-6, 0.005] read "95 % CI -0.0 to 0.5 %" (independent probe)."""
+    from pipeline.diagnostics.engine import Diagnoser
+    text = Diagnoser._gain_text({"before": 1.0, "after": 0.998, "relative": 0.002, "ci95": [-5e-6, 0.005]}, -3.0)
+    assert "95 % CI -0.0005 to 0.5 %" in text and "-0.0 " not in text
+    assert "(50.0 % better, 95 % CI 40.0 to 60.0 %" in Diagnoser._gain_text(
+        {"before": 1.0, "after": 0.5, "relative": 0.5, "ci95": [0.4, 0.6]}, -300.0)
