@@ -567,40 +567,64 @@ class Diagnoser:
                 best.alternates = self._alternates(h, wr, sig, [c.hyp for c in tie])
         return out, ctx.skipped
 
-    FALLBACK_SHARE = 0.5   # a family's hypothesis explaining this share of its representative's is a fallback
-    MAX_FALLBACKS = 3
+    FALLBACK_SHARE = 0.5   # after a failed refit: the family's hypotheses explaining this share of its
+    MAX_FALLBACKS = 3      # representative's, at most this many, are refitted instead
+    MAX_ALTERNATES = 3     # a family of alternative forms: this many more refits, largest share first
 
     def _alternates(self, h: Hypothesis, wr, sig: list, taken: list[Hypothesis]) -> list:
-        """The family's other significant hypotheses that explain at least ``FALLBACK_SHARE`` of the
-        representative's linearised share, largest first, one per column (h*abs(h) is h**2 on a positive
-        level), at most ``MAX_FALLBACKS``; refitted only when the representative's refit fails from every
-        start (:meth:`_fallbacks`)."""
+        """The family's other significant hypotheses, largest linearised share first, one per column
+        (h*abs(h) is h**2 on a positive level) and one per place (a lag or a limit at another grid value
+        is the same place: the refit frees the value), without the representative and its near tie
+        (``taken``): what :meth:`_fallbacks` may refit."""
         seen = [wr] + [w for h2, w in sig if any(h2 is t for t in taken)]
         same = lambda a, b: (abs(a.r2 - b.r2) <= 1e-9 * b.r2
                              and abs(a.statistic - b.statistic) <= 1e-9 * abs(b.statistic))
+        places = {self._where(h)}      # not the same place at another grid value: its refit frees that value
         out = []
         for h2, w2 in sorted(sig, key=lambda x: -x[1].r2):
-            if h2 is h or any(h2 is t for t in taken) or w2.r2 < self.FALLBACK_SHARE * wr.r2:
+            if h2 is h or any(h2 is t for t in taken) or any(same(w2, w) for w in seen) \
+                    or self._where(h2) in places:
                 continue
-            if any(same(w2, w) for w in seen):
-                continue
+            places.add(self._where(h2))
             seen.append(w2)
             out.append((h2, w2))
-        return out[:self.MAX_FALLBACKS]
+        return out
 
     def _fallbacks(self, todo: list[Candidate]) -> list[Candidate]:
-        """For a family whose representative's refit failed from every start (it diverged, or ended
-        above the current model's error), its next significant hypotheses (:meth:`_alternates`) as candidates to refit: the linearised share ranks
-        hypotheses only near the current fit, and the one it ranks first can be one that cannot be
-        simulated (on a tank with square-root outflow fitted as linear, c·h² with c > 0 runs away
-        while sqrt(h), ranked below it, is the cause)."""
+        """More of a family's significant hypotheses to refit (from :meth:`_alternates`), as candidates
+        with the family's p-value:
+
+        * the ``MAX_ALTERNATES`` largest, beside a refitted representative, for a family of alternative
+          forms (``Family.refit_alternates``, the static-term library): the linearised share ranks forms
+          only near the current fit. On a tank with square-root outflow fitted as linear, sqrt(h)
+          explains under half of h**2's share there, yet its refit is the cause (coefficient within
+          2 %). Not on a long record (:meth:`_long`; Silverbox: 4 s more for the same findings), where
+          the representative and its near tie stand for the family as before;
+        * after a representative's refit failed from every start (it diverged, or ended above the
+          current model's error), the next ones explaining at least ``FALLBACK_SHARE`` of its share, at
+          most ``MAX_FALLBACKS``: the first-ranked hypothesis can be one that cannot be simulated (c·h²
+          with c > 0 runs away on that tank)."""
         out = []
         for c in todo:
-            if c.fit is not None or not c.alternates or not c.reason.startswith("refit failed"):
+            if not c.alternates:
                 continue
-            keys = ", ".join(h2.key for h2, _ in c.alternates)
-            c.reason += f"; the family's next significant hypotheses refitted instead: {keys}"
-            for h2, w2 in c.alternates:
+            if c.fit is None:
+                if not c.reason.startswith("refit failed"):
+                    continue
+                alts = [(h2, w2) for h2, w2 in c.alternates
+                        if w2.r2 >= self.FALLBACK_SHARE * c.wald.r2][:self.MAX_FALLBACKS]
+                if not REGISTRY[c.hyp.family].refit_alternates:
+                    if not alts:
+                        continue
+                    c.reason += ("; the family's next significant hypotheses refitted instead: "
+                                 + ", ".join(h2.key for h2, _ in alts))
+                else:
+                    alts = c.alternates[:self.MAX_ALTERNATES]
+            elif REGISTRY[c.hyp.family].refit_alternates and not self._long(c.fit.model):
+                alts = c.alternates[:self.MAX_ALTERNATES]
+            else:
+                continue
+            for h2, w2 in alts:
                 out.append(Candidate(h2, w2, c.p_family, [{"test": f"added_term_wald[{h2.key}]",
                                                            "statistic": w2.statistic, "p_value": w2.p_value,
                                                            "dof": w2.dof}], runner_up=True, places=c.places))
@@ -893,6 +917,11 @@ class Diagnoser:
 
     # simulated steps (samples x substeps) from which an accepted model gets its own compiled kernel
     COMPILE_MIN_STEPS = 200_000
+
+    def _long(self, m: Model) -> bool:
+        """A record long enough that each simulation of ``m`` costs milliseconds (compiled kernels pay
+        off there): extra refits of alternative forms are skipped on it (:meth:`_fallbacks`)."""
+        return len(self.prob.t) * m.substeps >= self.COMPILE_MIN_STEPS
 
     def _compiled_if_long(self, m: Model) -> Model:
         """A refit's model with its additive terms compiled (as :meth:`_accepted` does, and from the same

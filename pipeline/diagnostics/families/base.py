@@ -124,6 +124,10 @@ class Family:
     # the added-term test's R² approximates the refit's SSE drop, so the engine may skip the refit of a
     # candidate explaining far less than the strongest one (engine._screen); False: always refitted
     screened: bool = True
+    # the family's hypotheses are alternative forms whose linearised shares at the current fit do not
+    # rank their refits (a library of terms): its next significant hypotheses (engine._alternates) are
+    # refitted beside the representative, and the refits' ΔBIC decides
+    refit_alternates: bool = False
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         raise NotImplementedError

@@ -63,6 +63,9 @@ def library(ctx: Context, eq: str) -> list[str]:
 
 class StaticNonlinearity(Family):
     id = "static_nonlinearity"
+    # on a Torricelli tank fitted as linear, h**2 and h*u explain more of the residual than sqrt(h) at
+    # the linear fit, yet sqrt(h)'s refit is the better model: the forms are compared by their refits
+    refit_alternates = True
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         return [self._hyp(ctx, eq, g) for eq in ctx.structure.dynamic_eqs
