@@ -124,7 +124,10 @@ class Comparer:
             raise ConfigError(f"{expr.text!r} uses {missing[0]!r}, which is not measured", file=self.file,
                               key="structures")
         args = [self.data[n] if n in self.data else self.model.params[n] for n in names]
-        v = np.broadcast_to(np.asarray(vectorize(expr, names)(*args), float), self.rec.t.shape)
+        # a user's term may overflow on the data (exp(x*100)): its structure's rows then say "regressors
+        # contain NaN or infinite values", without numpy's RuntimeWarning on stderr first
+        with np.errstate(all="ignore"):
+            v = np.broadcast_to(np.asarray(vectorize(expr, names)(*args), float), self.rec.t.shape)
         return v if rows is None else v[rows]
 
     def regressors(self, name: str, terms: list[str]) -> np.ndarray:

@@ -237,3 +237,27 @@ def test_a_diverged_fold_gives_no_spread_and_no_numpy_warning():
         rec = r.record()
     assert rec["cv_sd"] is None and rec["cv_mean"] == math.inf
     assert StructureResult("M", "ls", ["x"], cv_sim=[0.1, 0.3]).record()["cv_sd"] == pytest.approx(0.1414213562)
+
+
+def test_a_candidate_term_that_overflows_is_a_row_error_without_numpy_warnings(tmp_path):
+    """exp(exp(exp(x*100))) on the demo record: numpy printed RuntimeWarnings on stderr (an independent
+    probe); the structure's rows carry the reason."""
+    import warnings
+    t = np.arange(0, 40.0001, 0.05)
+    u = lambda tt: np.sin(tt) + 0.5 * np.sin(0.3 * tt)
+    sol = solve_ivp(lambda tt, x: -x + u(tt), (0, 40), [0.0], t_eval=t, rtol=1e-10, atol=1e-12)
+    pd.DataFrame({"t": t, "u": u(t), "x": sol.y[0]}).to_csv(tmp_path / "d.csv", index=False)
+    cfg = {"name": "blowup", "seed": 0,
+           "data": {"path": "d.csv", "time": "t", "inputs": ["u"], "outputs": ["x"], "intersample": "foh"},
+           "model": {"states": ["x"], "inputs": ["u"], "params": {"a": 1.0}, "free": ["a"],
+                     "equations": {"x": "-a*x + u"}},
+           "diagnose": {"families": [], "max_findings": 0},
+           "structures": {"equation": "x", "known": "u", "cv_folds": 3,
+                          "candidates": {"M1": ["exp(exp(exp(x*100)))"], "M2": ["x"]}},
+           "estimators": ["ls"]}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
+        warnings.simplefilter("error", RuntimeWarning)
+        s = analyse(load_config(tmp_path / "c.yaml")).summary
+    rows = {m["name"]: m for m in s["models"] if m.get("estimator") == "ls"}
+    assert "NaN or infinite" in rows["M1"]["error"] and rows["M2"]["error"] is None
