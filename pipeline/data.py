@@ -33,6 +33,7 @@ import numpy as np
 
 from .config import LoadedConfig
 from .errors import ConfigError, DataError
+from .hashing import file_sha256  # noqa: F401 - imported from here by runs, assignment
 from .loaders import ReadSpec, read_columns
 
 
@@ -100,14 +101,6 @@ class Split:
 
 
 MAX_MAGNITUDE = 1e75   # |values| above this overflow the 4th powers (kurtosis, HAC bandwidths)
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def records_sha256(entries: list[tuple[str, str | None]]) -> str:

@@ -41,7 +41,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import hashlib
 import json
 import os
 import re
@@ -55,6 +54,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import InputError
+from .hashing import file_sha256
 
 TOOL = "sysid-pipeline"
 MARKER = ".sysid-run"
@@ -83,8 +83,8 @@ def kill_point(point: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
-def _err(target: Path | str, what: str, key: str = "--out") -> InputError:
-    return InputError(f"{target}: {what}", key=key)
+def _err(target: Path | str, what: str) -> InputError:
+    return InputError(f"{target}: {what}", key="--out")
 
 
 # ---------------------------------------------------------------- recognising run folders
@@ -123,14 +123,6 @@ def is_legacy_run(folder: Path) -> bool:
             and TOOL in manifest["versions"])
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _listed_files_ok(folder: Path, files: dict, content: bool = False) -> bool:
     """Every listed file is a regular file of its listed size, and with ``content`` also of its
     listed sha256 (format 2 entries ``{"size", "sha256"}``; a format-1 entry is the size alone)."""
@@ -146,7 +138,7 @@ def _listed_files_ok(folder: Path, files: dict, content: bool = False) -> bool:
             return False
         if content and isinstance(entry, dict):
             try:
-                if _sha256(folder / rel) != entry.get("sha256"):
+                if file_sha256(folder / rel) != entry.get("sha256"):
                     return False
             except OSError:
                 return False
@@ -333,8 +325,8 @@ def check_new_path(path: Path | str, *, key: str, folder: bool) -> Path:
         st = os.lstat(resolved)
     except FileNotFoundError:
         return resolved
-    except InputError as exc:
-        raise InputError(str(exc).split(": ", 1)[-1], key=key) from None
+    except InputError as exc:       # the run-folder checks name --out: name this command's key
+        raise InputError(exc.message, key=key) from None
     except OSError as exc:
         raise InputError(f"{shown}: cannot use this path: {exc.strerror}", key=key) from None
     if stat.S_ISLNK(st.st_mode):
@@ -518,7 +510,7 @@ def finalize(tmp: Path, run_id: str) -> None:
             if p.is_symlink() or not p.is_file():
                 continue
             _fsync_path(p)
-            files[str(p.relative_to(tmp))] = {"size": p.stat().st_size, "sha256": _sha256(p)}
+            files[str(p.relative_to(tmp))] = {"size": p.stat().st_size, "sha256": file_sha256(p)}
         _fsync_path(Path(dirpath), directory=True)
     files.pop(MARKER, None)
     marker = {"tool": TOOL, "format": MARKER_FORMAT, "run_id": run_id, "files": files}

@@ -214,7 +214,7 @@ def _tried(history: list[dict]) -> list[dict]:
 
 def _not_testable(history: list[dict]) -> list[dict]:
     """What a family's guard kept from being tested, and why (each reason once, first iteration first):
-    e.g. a static input nonlinearity on an input with two levels, a periodic term with too few cycles."""
+    e.g. a periodic term with too few cycles in the estimation window."""
     seen = dict.fromkeys((sk["family"], sk["reason"]) for it in history for sk in it.get("skipped", []))
     return [{"family": f, "reason": r} for f, r in seen]
 
@@ -304,9 +304,8 @@ def run(config_path: str | Path, out: str | Path | None = None, *, html: bool = 
     lc = load_config(config_path)
     inputs = input_paths(lc)
     if track:   # a bad URI or a missing MLflow fails now, not after the analysis and the run folder
-        from .tracking.mlflow_backend import _import_mlflow, check_uri
-        track = check_uri(track, key="--track")
-        _import_mlflow()
+        from .tracking.mlflow_backend import check_tracking
+        track = check_tracking(track, key="--track")
     if out is not None:
         check_target(out, inputs=inputs, default=False)   # "" is refused, not taken as the default
     else:  # the run id follows from the two hashes: check reports/<run-id> now (the data is read later)

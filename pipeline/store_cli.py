@@ -89,9 +89,8 @@ def cmd_track(a: argparse.Namespace) -> int:
 def cmd_batch(a: argparse.Namespace) -> int:
     from .batch import exit_code, run_batch
     if a.track:
-        from .tracking.mlflow_backend import _import_mlflow, check_uri
-        check_uri(a.track, key="--track")
-        _import_mlflow()
+        from .tracking.mlflow_backend import check_tracking
+        check_tracking(a.track, key="--track")
     results = run_batch(a.configs, jobs=a.jobs, executor=a.executor, scheduler=a.scheduler, root=a.root,
                         html=a.html)
     if a.track:

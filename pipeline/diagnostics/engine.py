@@ -67,8 +67,8 @@ class Candidate:
     runner_up: bool = False      # a family's near-tie second hypothesis (Diagnoser._near_tie)
     places: int = 1              # distinct places the family's hypotheses act on (Diagnoser._where)
     lr: stats.TestResult | None = None   # the likelihood-ratio test of the refit against the current model
-    # the family's next significant hypotheses, refitted only if this one's refit fails from every start
-    # (Diagnoser._fallbacks); (Hypothesis, WaldResult) pairs, largest linearised share first
+    # the family's other significant hypotheses, refitted beside it for a family of forms or when its
+    # refit fails from every start (Diagnoser._fallbacks); (Hypothesis, WaldResult), largest share first
     alternates: list = field(default_factory=list)
 
     @property
@@ -539,8 +539,7 @@ class Diagnoser:
             sig = [(h, wr) for h, wr in tested if wr.p_value * len(hyps) < self.alpha]
             h, wr = (max(sig, key=lambda x: x[1].r2) if sig
                      else max(tested, key=lambda x: x[1].statistic / x[1].dof))
-            best = Candidate(h, wr, 1.0, [{"test": f"added_term_wald[{h.key}]", "statistic": wr.statistic,
-                                           "p_value": wr.p_value, "dof": wr.dof}])
+            best = Candidate(h, wr, 1.0, [_wald_evidence(h, wr)])
             best.p_family = min(1.0, p_min * len(hyps))
             best = self._lr_screen(fit, fam, hyps, results, best, lr_done)
             if fam == "periodic_disturbance":
@@ -577,12 +576,10 @@ class Diagnoser:
         is the same place: the refit frees the value), without the representative and its near tie
         (``taken``): what :meth:`_fallbacks` may refit."""
         seen = [wr] + [w for h2, w in sig if any(h2 is t for t in taken)]
-        same = lambda a, b: (abs(a.r2 - b.r2) <= 1e-9 * b.r2
-                             and abs(a.statistic - b.statistic) <= 1e-9 * abs(b.statistic))
         places = {self._where(h)}      # not the same place at another grid value: its refit frees that value
         out = []
         for h2, w2 in sorted(sig, key=lambda x: -x[1].r2):
-            if h2 is h or any(h2 is t for t in taken) or any(same(w2, w) for w in seen) \
+            if h2 is h or any(h2 is t for t in taken) or any(_same_column(w2, w) for w in seen) \
                     or self._where(h2) in places:
                 continue
             places.add(self._where(h2))
@@ -606,28 +603,20 @@ class Diagnoser:
           with c > 0 runs away on that tank)."""
         out = []
         for c in todo:
-            if not c.alternates:
-                continue
-            if c.fit is None:
-                if not c.reason.startswith("refit failed"):
-                    continue
+            forms = REGISTRY[c.hyp.family].refit_alternates
+            failed = c.fit is None and c.reason.startswith("refit failed")
+            if failed and not forms:
                 alts = [(h2, w2) for h2, w2 in c.alternates
                         if w2.r2 >= self.FALLBACK_SHARE * c.wald.r2][:self.MAX_FALLBACKS]
-                if not REGISTRY[c.hyp.family].refit_alternates:
-                    if not alts:
-                        continue
+                if alts:
                     c.reason += ("; the family's next significant hypotheses refitted instead: "
                                  + ", ".join(h2.key for h2, _ in alts))
-                else:
-                    alts = c.alternates[:self.MAX_ALTERNATES]
-            elif REGISTRY[c.hyp.family].refit_alternates and not self._long(c.fit.model):
+            elif forms and (failed or (c.fit is not None and not self._long(c.fit.model))):
                 alts = c.alternates[:self.MAX_ALTERNATES]
             else:
                 continue
-            for h2, w2 in alts:
-                out.append(Candidate(h2, w2, c.p_family, [{"test": f"added_term_wald[{h2.key}]",
-                                                           "statistic": w2.statistic, "p_value": w2.p_value,
-                                                           "dof": w2.dof}], runner_up=True, places=c.places))
+            out += [Candidate(h2, w2, c.p_family, [_wald_evidence(h2, w2)], runner_up=True, places=c.places)
+                    for h2, w2 in alts]
         return out
 
     WITHIN_TIE = 0.8   # a family's runner-up explaining this share of its best hypothesis' is refitted too
@@ -643,15 +632,12 @@ class Diagnoser:
         candidate with the family's p-value. The linearised R² only approximates the refit's SSE
         drop, and a near tie can reverse in the refit: on a Torricelli tank sqrt(h) explained 0.58
         against h**2's 0.69 and only the refit tells them apart; a tank's jump in b against one in a."""
-        # not the same column under another name (h*abs(h) is h**2 on a level that stays positive)
-        same = lambda w2: abs(w2.r2 - wr.r2) <= 1e-9 * wr.r2 and abs(w2.statistic - wr.statistic) <= 1e-9 * abs(wr.statistic)
-        rest = [(h2, w2) for h2, w2 in sig if self._where(h2) != self._where(h) and not same(w2)
+        rest = [(h2, w2) for h2, w2 in sig if self._where(h2) != self._where(h) and not _same_column(w2, wr)
                 and w2.r2 >= self.WITHIN_TIE * wr.r2]
         if not rest:
             return []
         h2, w2 = max(rest, key=lambda x: x[1].r2)
-        c = Candidate(h2, w2, p_family, [{"test": f"added_term_wald[{h2.key}]", "statistic": w2.statistic,
-                                          "p_value": w2.p_value, "dof": w2.dof}], runner_up=True)
+        c = Candidate(h2, w2, p_family, [_wald_evidence(h2, w2)], runner_up=True)
         ee = self._equation_error_evidence(fit, h2)
         if ee:
             c.evidence.append(ee)
@@ -928,7 +914,7 @@ class Diagnoser:
         length): a refit runs 20–150 simulations of one structure, so on a long record it pays the
         compile as an accepted model does. Bit-identical to the interpreted model
         (tests/test_simulate.py), so no number changes."""
-        return m.compiled() if len(self.prob.t) * m.substeps >= self.COMPILE_MIN_STEPS else m
+        return m.compiled() if self._long(m) else m
 
     def _accepted(self, fit: FitResult) -> FitResult:
         """The accepted fit, whose model every later hypothesis extends: on a long record its extension
@@ -1179,6 +1165,17 @@ class Diagnoser:
         f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic, prior_penalty=c.prior_penalty,
                  extended_equations=fit.model.describe_equations(), runners_up=runners)
         return f
+
+
+def _wald_evidence(h: Hypothesis, w: stats.WaldResult) -> dict:
+    """A candidate's evidence row for its added-term test."""
+    return {"test": f"added_term_wald[{h.key}]", "statistic": w.statistic, "p_value": w.p_value, "dof": w.dof}
+
+
+def _same_column(a: stats.WaldResult, b: stats.WaldResult) -> bool:
+    """Two hypotheses whose tests agree to 1e-9: the same column under another name (h*abs(h) is h**2
+    on a level that stays positive)."""
+    return abs(a.r2 - b.r2) <= 1e-9 * b.r2 and abs(a.statistic - b.statistic) <= 1e-9 * abs(b.statistic)
 
 
 def _family_r2(cands: list[Candidate]) -> dict[str, float]:

@@ -77,6 +77,13 @@ def check_uri(uri: str | None, key: str = "--uri") -> str:
     return uri
 
 
+def check_tracking(uri: str | None, key: str) -> str:
+    """Before a run that will be tracked: the URI is usable (:func:`check_uri`) and MLflow installed."""
+    uri = check_uri(uri, key)
+    _import_mlflow()
+    return uri
+
+
 def resolve_uri(uri: str | None) -> str:
     """``None``/``"default"`` → the default sqlite store; a sqlite file's folder is created."""
     uri = check_uri(uri)
@@ -126,7 +133,6 @@ def _chunks(items: list, n: int):
 def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> str:
     """Log one run folder; returns the MLflow run id."""
     MlflowClient = _import_mlflow()
-    from mlflow.entities import Metric, Param, RunTag
     folder = Path(folder)
     try:
         summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
@@ -138,7 +144,7 @@ def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str
     if not experiment or not experiment.strip():
         raise InputError("expected a non-empty experiment name", key="--experiment")
     try:
-        return _log(MlflowClient, Metric, Param, RunTag, folder, summary, manifest, config, uri, experiment)
+        return _log(MlflowClient(tracking_uri=uri), folder, summary, manifest, config, uri, experiment)
     except InputError:
         raise
     except Exception as exc:   # the tracking store failed (unreachable, locked, refused): not the analysis
@@ -154,8 +160,8 @@ def _from_tracking_store(exc: BaseException) -> bool:
     return isinstance(exc, OSError) or mod.split(".")[0] in ("mlflow", "sqlalchemy", "requests", "urllib3")
 
 
-def _log(MlflowClient, Metric, Param, RunTag, folder, summary, manifest, config, uri, experiment) -> str:
-    client = MlflowClient(tracking_uri=uri)
+def _log(client, folder: Path, summary: dict, manifest: dict, config: dict, uri: str, experiment: str) -> str:
+    from mlflow.entities import Metric, Param, RunTag
     exp = client.get_experiment_by_name(experiment)
     exp_id = exp.experiment_id if exp else client.create_experiment(experiment, artifact_location=_artifact_location(uri))
     tags = tags_of(summary, manifest)
