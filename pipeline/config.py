@@ -155,6 +155,8 @@ class ModelCfg(_Strict):
     substeps: Annotated[Integer, Field(ge=1, le=64)] = 1  # RK4 sub-steps per sample interval
     # dead time of every input (seconds): u(t - input_delay); written back by extended.yaml
     input_delay: Annotated[Finite, Field(ge=0)] | None = None
+    # the inputs model.input_delay acts on (default: every input); e.g. one actuator of two with a dead time
+    delayed_inputs: list[StrictStr] | None = None
 
 
 class SplitCfg(_Strict):
@@ -536,6 +538,19 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     allowed = set(m.states) | set(m.inputs) | set(m.params) | {"t"}
     eqs = {s: parse(m.equations[s], allowed, where=f"model.equations.{s}", file=f) for s in m.states}
     outs = {o: parse(e, allowed, where=f"model.outputs.{o}", file=f) for o, e in m.outputs.items()}
+    if m.delayed_inputs is not None:
+        if m.input_delay is None:
+            raise ConfigError("delayed_inputs without model.input_delay: give the dead time in seconds",
+                              file=f, key="model.delayed_inputs")
+        if not m.delayed_inputs:
+            raise ConfigError("an empty list; leave the key out for a delay of every input",
+                              file=f, key="model.delayed_inputs")
+        for u in m.delayed_inputs:
+            if u not in m.inputs:
+                raise ConfigError(f"{u!r} is not a model input (model.inputs: {', '.join(m.inputs)})",
+                                  file=f, key="model.delayed_inputs")
+        if len(set(m.delayed_inputs)) != len(m.delayed_inputs):
+            raise ConfigError("an input is listed twice", file=f, key="model.delayed_inputs")
     if isinstance(m.initial, dict):
         for s in m.initial:
             if s not in m.states:

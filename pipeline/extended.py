@@ -34,6 +34,8 @@ def extended_config(canonical: dict, model: Model, config_path: Path, data_path:
     m["free"] = list(dict.fromkeys([k for k in model.free if k != model.delay]))
     if model.delay is not None:
         m["input_delay"] = float(model.params[model.delay])
+        if model.delay_inputs:
+            m["delayed_inputs"] = list(model.delay_inputs)
     outs = dict(m.get("outputs") or {})
     offsets = [t for t in model.terms if t.is_output]
     if offsets:

@@ -99,6 +99,7 @@ class Model:
     intersample: str = "zoh"
     terms: tuple[Term, ...] = ()
     delay: str | None = None            # parameter name of the input delay (seconds)
+    delay_inputs: tuple[str, ...] = ()  # the inputs that delay acts on; () = every input
     nominal_params: tuple[str, ...] = field(default=())
     input_rewrites: tuple[Rewrite, ...] = ()
     param_rewrites: tuple[Rewrite, ...] = ()
@@ -137,7 +138,8 @@ class Model:
                     intersample=lc.cfg.data.intersample, nominal_params=tuple(m.params))
         if m.input_delay is not None:  # a known dead time (config key model.input_delay): fixed
             name = fresh_name(model, "input_delay_s")
-            model = replace(model, params={**model.params, name: float(m.input_delay)}, delay=name)
+            model = replace(model, params={**model.params, name: float(m.input_delay)}, delay=name,
+                            delay_inputs=tuple(m.delayed_inputs or ()))
         return model
 
     @property
@@ -150,10 +152,11 @@ class Model:
         return replace(self, params=p)
 
     def extend(self, terms: list[Term], new_params: dict[str, float], delay: str | None = None, *,
-               input_rewrites: tuple = (), param_rewrites: tuple = (), limits: tuple = (),
+               delay_inputs: tuple[str, ...] = (), input_rewrites: tuple = (), param_rewrites: tuple = (), limits: tuple = (),
                extra_states: dict[str, tuple[str, float]] | None = None) -> "Model":
         """A copy with extensions; ``new_params`` (coefficients, frequencies, limits, delay...) become
-        free. ``extra_states``: name -> (equation text, initial value). A new name that is already a
+        free. ``delay``: the parameter of a new input delay, acting on ``delay_inputs`` (every input
+        when empty). ``extra_states``: name -> (equation text, initial value). A new name that is already a
         nominal (user) parameter is a programming error: use :func:`fresh_name`."""
         clash = [k for k in new_params if k in self.nominal_params]
         if clash:
@@ -168,7 +171,8 @@ class Model:
                 init[name] = float(x0)
             states = states + tuple(extra_states)
         return replace(self, params=p, free=self.free + tuple(k for k in new_params if k not in self.free),
-                       terms=self.terms + tuple(terms), delay=delay or self.delay, states=states,
+                       terms=self.terms + tuple(terms), delay=delay or self.delay,
+                       delay_inputs=tuple(delay_inputs) if delay else self.delay_inputs, states=states,
                        equations=eqs, initial=init, input_rewrites=self.input_rewrites + tuple(input_rewrites),
                        param_rewrites=self.param_rewrites + tuple(param_rewrites),
                        limits=self.limits + tuple(limits))

@@ -565,14 +565,22 @@ def _check_programs(pr: Programs, n_p: int, nx: int, nu: int) -> None:
         raise ValueError("simulate_states: an extension program refers past the state, input or parameter vectors")
 
 
-def shifted_input(U: np.ndarray, t: np.ndarray, delay: float) -> np.ndarray:
-    """u(t - delay), linearly interpolated, held at the first value before the record starts."""
+def shifted_input(U: np.ndarray, t: np.ndarray, delay: float, columns: list[int] | None = None) -> np.ndarray:
+    """u(t - delay), linearly interpolated, held at the first value before the record starts, for the
+    ``columns`` of U (every column when None); the other columns are returned as they are."""
     if delay == 0.0:
         return U
-    out = np.empty_like(U)
-    for j in range(U.shape[1]):
+    out = np.array(U, dtype=float, copy=True)
+    for j in (range(U.shape[1]) if columns is None else columns):
         out[:, j] = np.interp(t - delay, t, U[:, j], left=U[0, j])
     return out
+
+
+def delayed_columns(model: Model) -> list[int] | None:
+    """The columns of U (ordered as ``model.inputs``) that the model's input delay acts on; None = all."""
+    if not model.delay_inputs:
+        return None
+    return [model.inputs.index(u) for u in model.delay_inputs]
 
 
 def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, *,
@@ -582,7 +590,7 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     p = np.array([model.params[k] for k in model.param_names], dtype=float)
     t = np.ascontiguousarray(t, dtype=float)
     if model.delay is not None:
-        U = shifted_input(U, t, model.params[model.delay])
+        U = shifted_input(U, t, model.params[model.delay], delayed_columns(model))
     U = np.ascontiguousarray(U, dtype=float)
     if U.ndim == 1:
         U = U[:, None]

@@ -554,7 +554,7 @@ class Diagnoser:
                                                 "Fourier frequencies searched (Bonferroni)"})
                 best.p_family = periodic_p_value(best.p_family, fisher.p_value, n_est)
             if fam == "input_delay":
-                best.evidence.append(self._xcorr_lag(fit))
+                best.evidence.append(self._xcorr_lag(fit, best.hyp.input))
             ee = self._equation_error_evidence(fit, best.hyp)
             if ee:
                 best.evidence.append(ee)
@@ -707,10 +707,11 @@ class Diagnoser:
                               "p_value": lr.p_value, "detail": lr.detail})
         return cand
 
-    def _xcorr_lag(self, fit: FitResult) -> dict:
+    def _xcorr_lag(self, fit: FitResult, input_name: str | None = None) -> dict:
         """Lag (samples, parabola-refined) that maximises the cross-correlation of the measured output
         with the nominal simulation on the estimation part: > 0 when the measurement lags the
-        simulation, i.e. a dead time. p-value: the residual–input cross-correlation test."""
+        simulation, i.e. a dead time. p-value: the residual–input cross-correlation test, with the
+        delayed input (the first when every input is)."""
         sl = self.prob.split.est_slice()
         y = self.prob.Y[sl, 0] - self.prob.Y[sl, 0].mean()
         yh = fit.Yhat[sl, 0] - fit.Yhat[sl, 0].mean()
@@ -727,7 +728,8 @@ class Diagnoser:
         if 0 < k < len(c) - 1:
             den = c[k - 1] - 2 * c[k] + c[k + 1]
             shift = float(np.clip(0.5 * (c[k - 1] - c[k + 1]) / den, -0.5, 0.5)) if den != 0 else 0.0
-        xc = stats.input_crosscorr(fit.resid_est[:, 0], self.prob.U[sl, 0], 25, self.alpha)
+        j = fit.model.inputs.index(input_name) if input_name else 0
+        xc = stats.input_crosscorr(fit.resid_est[:, 0], self.prob.U[sl, j], 25, self.alpha)
         return {"test": "output_simulation_crosscorrelation_lag", "statistic": float(lags[k] + shift),
                 "p_value": xc.p_value, "detail": "lag in samples (biased toward 0: the fitted nominal partly compensates a delay); "
                           "p from the residual-input cross-correlation"}

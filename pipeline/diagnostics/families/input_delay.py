@@ -1,4 +1,6 @@
-"""``input_delay``: every input acts as u(t − d). Tested through the output sensitivity to d at
+"""``input_delay``: the inputs act as u(t − d). On a model with several inputs the delay of every
+input and the delay of each input alone are separate hypotheses (one actuator of two with a transport
+delay: a common delay cannot fit it, and a first-order lag on that input would be named instead). Tested through the output sensitivity to d at
 d = 0; estimated by a profile search (weighted SSE over integer delays, a parabola through the best
 one and its neighbours for the fractional part), then one refit of all free parameters at that delay;
 when the profile's best is below a quarter sample, from the added-term test's joint estimate instead."""
@@ -19,23 +21,30 @@ class InputDelay(Family):
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         if ctx.model.delay is not None or not ctx.model.inputs:
             return []
-        return [Hypothesis(self.id, "input_delay", coefs=[fresh_name(ctx.model, "input_delay_s")],
-                           info={"step": 0.5 * ctx.dt})]
+        name = fresh_name(ctx.model, "input_delay_s")
+        out = [Hypothesis(self.id, "input_delay", coefs=[name], info={"step": 0.5 * ctx.dt})]
+        if len(ctx.model.inputs) > 1:
+            out += [Hypothesis(self.id, f"input_delay:{u}", coefs=[name], input=u, info={"step": 0.5 * ctx.dt})
+                    for u in ctx.model.inputs]
+        return out
+
+    @staticmethod
+    def _delayed(model, hyp, d: float):
+        return model.extend([], {hyp.coefs[0]: float(d)}, delay=hyp.coefs[0],
+                            delay_inputs=(hyp.input,) if hyp.input else ())
 
     def extend(self, model, hyp, values=None):
-        name = hyp.coefs[0]
-        return model.extend([], {name: float((values or {}).get(name, 0.0))}, delay=name)
+        return self._delayed(model, hyp, (values or {}).get(hyp.coefs[0], 0.0))
 
     def step(self, dg) -> float:
         return 0.5 * dg.dt
 
     def estimate(self, dg, fit, cand):
-        name = cand.hyp.coefs[0]
         y = dg.prob.Y[dg.prob.split.est_slice()]
         kmax = max(1, min(int(round(dg.max_delay / dg.dt)), len(y) // 4))
         sse = []
         for k in range(kmax + 1):
-            Yh = dg.sim_est(fit.model.extend([], {name: k * dg.dt}, delay=name), fit.x0)
+            Yh = dg.sim_est(self._delayed(fit.model, cand.hyp, k * dg.dt), fit.x0)
             sse.append(np.inf if Yh is None else float(np.sum(((y - Yh) * dg.w) ** 2)))
         k0 = int(np.argmin(sse))
         frac = 0.0
@@ -53,9 +62,14 @@ class InputDelay(Family):
                 cand.reason = "best delay below a quarter sample"
                 return None
             d = b
-        return fit_output_error(fit.model.extend([], {name: d}, delay=name), dg.prob, start=estimated_x0(fit))
+        return fit_output_error(self._delayed(fit.model, cand.hyp, d), dg.prob, start=estimated_x0(fit))
 
     def describe(self, hyp, fit, val, sd):
         d = float(fit.model.params[fit.model.delay])
         out = {"delay_s": d, "delay_std": sd.get(hyp.coefs[0])}
+        if hyp.input:
+            out["input"] = hyp.input
+            return out, f"The input {hyp.input} acts with a dead time of {d:.4g} s; delaying it"
+        if len(fit.model.inputs) > 1:
+            return out, f"Every input acts with a dead time of {d:.4g} s; delaying them"
         return out, f"The input acts with a dead time of {d:.4g} s; delaying it"
