@@ -37,6 +37,7 @@ from .fit import FitResult, Problem, equation_error_start
 from .extended import extended_config
 from .model import Model
 from .runfolder import check_target, finalize, kill_point, make_temp, publish
+from .series import simulation_csv
 
 SCHEMA = "sysid-summary/1"
 
@@ -280,6 +281,7 @@ def write_run(ctx: RunContext, out: Path | None, *, html: bool) -> Path:
         ext = extended_config(ctx.lc.canonical(), ctx.diag.final.model, ctx.lc.path, ctx.lc.data_path, target)
         (tmp / "extended.yaml").write_text("# the final model of run " + ctx.run_id + " as a runnable config\n"
                                            + yaml.safe_dump(ext, sort_keys=False, allow_unicode=True))
+        (tmp / "simulation.csv").write_bytes(simulation_csv(ctx.prob, ctx.diag, ctx.rec))
         if html:
             from .report import render_report
             (tmp / "report.html").write_text(render_report(ctx), encoding="utf-8")
