@@ -693,7 +693,7 @@ class Diagnoser:
         f = done[id(lr_h)] if done and id(lr_h) in done else self.estimate(fit, cand)
         if f is None:
             return best
-        lr = lr_against(fit, f, self.alpha, len(lr_h.searched))
+        lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
         p = min(1.0, 2.0 * lr.p_value)
         if p >= best.p_family:
             return best

@@ -22,7 +22,11 @@ class InputDelay(Family):
         if ctx.model.delay is not None or not ctx.model.inputs:
             return []
         name = fresh_name(ctx.model, "input_delay_s")
-        out = [Hypothesis(self.id, "input_delay", coefs=[name], info={"step": 0.5 * ctx.dt})]
+        # the delay of every input is also refitted at once and tested by the likelihood ratio
+        # (engine._lr_screen), its delay counted twice in the χ² degrees of freedom for the profile
+        # search over [0, max_delay_s] (module docstring)
+        out = [Hypothesis(self.id, "input_delay", coefs=[name],
+                          info={"step": 0.5 * ctx.dt, "lr_screen": True, "lr_extra_dof": 1})]
         if len(ctx.model.inputs) > 1:
             out += [Hypothesis(self.id, f"input_delay:{u}", coefs=[name], input=u, info={"step": 0.5 * ctx.dt})
                     for u in ctx.model.inputs]
