@@ -31,6 +31,7 @@ GRID_FTOL_BIC = 0.5
 class ParameterJump(Family):
     id = "parameter_jump"
     null_is_current = True   # p + 0·step(t − t_j) and p·(1 + 0·t) are p: the test reuses the fit's simulation
+    refit_alternates = True
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         m = ctx.model

@@ -1,0 +1,67 @@
+"""Which parameter jumped: a first-order thermal plant T' = −a T + b u whose loss coefficient a jumps
+from 0.5 to 0.8 at 120 s, on records computed here in closed form (the exact step response of each
+held input level; no pipeline code; the independent probe's ``th_jump_lo``, its input and noise
+streams reproduced).
+
+A jump of a changes both the time constant and the static gain b/a; a jump of b the gain alone. On the
+slow steps of this record their added-term tests are nearly collinear, and the family's representative
+(the largest linearised share, b) was the only one refitted: the finding was "b jumps from 1.02 to 0.66
+at 119.8 s" with a colored-noise finding after it for the misfit left. Every significant parameter's
+jump is now refitted beside the representative (``Family.refit_alternates``) and the refits' ΔBIC
+decides (here about −8 160 for a against −5 790 for b).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from pipeline.config import load_config
+from pipeline.runs import analyse
+
+DT, N, TJ = 0.1, 2000, 120.0
+
+
+def _record(path: Path, seed: int) -> None:
+    """Held levels U(0, 2) for 20–80 samples (the probe's draw order), exact zero-order-hold response,
+    white noise of 2 % of std(T) from its own stream."""
+    rng = np.random.default_rng(seed)
+    u = np.empty(N)
+    k = 0
+    while k < N:
+        level = rng.uniform(0.0, 2.0)
+        h = int(rng.integers(20, 81))
+        u[k:k + h] = level
+        k += h
+    t = np.arange(N) * DT
+    T = np.zeros(N)
+    for k in range(N - 1):   # exact over a sample interval with u held and a constant (TJ is a sample time)
+        a = 0.5 if t[k] < TJ else 0.8
+        e = np.exp(-a * DT)
+        T[k + 1] = T[k] * e + (1.0 * u[k] / a) * (1.0 - e)
+    y = T + 0.02 * T.std() * np.random.default_rng(seed + 1000).standard_normal(N)
+    pd.DataFrame({"t": t, "u": u, "T": y}).to_csv(path, index=False)
+
+
+@pytest.mark.parametrize("seed", [112])
+def test_a_jump_of_the_loss_coefficient_is_not_named_a_jump_of_the_input_gain(tmp_path, seed):
+    _record(tmp_path / "th.csv", seed)
+    cfg = {"name": "thermal", "seed": 0,
+           "data": {"path": "th.csv", "time": "t", "inputs": ["u"], "outputs": ["T"], "intersample": "zoh"},
+           "model": {"states": ["T"], "inputs": ["u"], "params": {"a": 0.55, "b": 1.1}, "free": ["a", "b"],
+                     "equations": {"T": "-a*T + b*u"}, "initial": {"T": 0.0}},
+           "diagnose": {"families": "all", "alpha": 0.01, "max_findings": 3}}
+    (tmp_path / "th.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    with contextlib.redirect_stderr(io.StringIO()):
+        s = analyse(load_config(tmp_path / "th.yaml")).summary
+    f = s["diagnosis"]["findings"]
+    assert f and f[0]["family"] == "parameter_jump", s["diagnosis"]["verdict"]
+    assert f[0]["parameter"] == "a", f[0]["description"]
+    assert abs(f[0]["time_s"] - TJ) <= 0.05 * N * DT
+    assert f[0]["before"] == pytest.approx(0.5, rel=0.2) and f[0]["after"] == pytest.approx(0.8, rel=0.2)
