@@ -62,24 +62,30 @@ def _cand(h, r2, reason="", fitted=False, alternates=()):
 
 
 def test_the_static_library_refits_every_alternate_and_other_families_only_after_a_failure():
+    """The static library and the jump family (which parameter jumped: a jump of a thermal loss
+    coefficient was named a jump of the input gain, tests/diagnosis/test_jump_which_parameter.py)
+    refit their alternates; a family of one form (a lag on another input) only after a failure."""
     dg = _diagnoser()
     lib = [(_h("sqrt(h)"), _w(0.3, 9.0)), (_h("u**2"), _w(0.2, 8.0))]
     static_ok = _cand(_h("h**2"), 0.75, fitted=True, alternates=lib)
     jumps = [(_h(f"{p}@1", "parameter_jump"), _w(r2, 20.0)) for p, r2 in (("b", 0.6), ("c", 0.5), ("d", 0.45), ("e", 0.1))]
     jump_ok = _cand(_h("a@1", "parameter_jump"), 0.7, fitted=True, alternates=jumps)
-    jump_failed = _cand(_h("a@2", "parameter_jump"), 0.7, reason="refit failed from 1 x the test's estimate: "
-                        "the model diverges", alternates=jumps)
+    lag = lambda u: Hypothesis("unmodeled_dynamics", f"{u}@6dt", coefs=["c"], input=u)
+    lags = [(lag(u), _w(r2, 20.0)) for u, r2 in (("u2", 0.6), ("u3", 0.5), ("u4", 0.45), ("u5", 0.1))]
+    lag_ok = _cand(lag("u1"), 0.7, fitted=True, alternates=lags)
+    lag_failed = _cand(lag("u1"), 0.7, reason="refit failed from 1 x the test's estimate: "
+                       "the model diverges", alternates=lags)
     screened = _cand(_h("x**2"), 0.7, reason="not refitted: ...", alternates=lib)   # not refitted, not failed
-    extra = dg._fallbacks([static_ok, jump_ok, jump_failed, screened])
-    # the library: both alternates, however small their share; the failed jump: share >= 0.5 x 0.7, at
-    # most three (0.1 is below); the refitted jump and the screened-out library: nothing
-    assert [c.hyp.key for c in extra] == ["sqrt(h)", "u**2", "b@1", "c@1", "d@1"]
+    extra = dg._fallbacks([static_ok, jump_ok, lag_ok, lag_failed, screened])
+    # the library and the jumps: their alternates (at most three), however small their share; the failed
+    # lag: share >= 0.5 x 0.7, at most three (0.1 is below); the refitted lag and the screened library: nothing
+    assert [c.hyp.key for c in extra] == ["sqrt(h)", "u**2", "b@1", "c@1", "d@1", "u2@6dt", "u3@6dt", "u4@6dt"]
     assert all(c.runner_up and c.places == 6 and c.p_family == 1e-12 and c.fit is None for c in extra)
-    assert "refitted instead: b@1, c@1, d@1" in jump_failed.reason and "instead" not in jump_ok.reason
-    # on a long record (Silverbox: 131 072 samples x 2 sub-steps) the library's extra refits are skipped
+    assert "refitted instead: u2@6dt, u3@6dt, u4@6dt" in lag_failed.reason and "instead" not in lag_ok.reason
+    # on a long record (Silverbox: 131 072 samples x 2 sub-steps) the alternates' extra refits are skipped
     long = _diagnoser(131072)
-    static_ok.alternates = lib
-    assert [c.hyp.key for c in long._fallbacks([static_ok, jump_failed])] == ["b@1", "c@1", "d@1"]
+    static_ok.alternates, jump_ok.alternates = lib, jumps
+    assert [c.hyp.key for c in long._fallbacks([static_ok, jump_ok, lag_failed])] == ["u2@6dt", "u3@6dt", "u4@6dt"]
 
 
 def _torricelli_tank(tmp_path, seed: int, noise: float):

@@ -73,6 +73,7 @@ class Context:
     dt: float
     freq_hz: float | None = None   # residual periodogram peak (Fisher's g)
     couplings: bool = False
+    long_record: bool = False      # simulations cost milliseconds here: no extra refits (engine._long)
     skipped: list = field(default_factory=list)   # (family, reason): guards that removed hypotheses
 
     def inputs_changing_sign(self, share: float = 0.05) -> list[int]:

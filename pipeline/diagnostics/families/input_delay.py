@@ -1,9 +1,13 @@
 """``input_delay``: the inputs act as u(t − d). On a model with several inputs the delay of every
 input and the delay of each input alone are separate hypotheses (one actuator of two with a transport
-delay: a common delay cannot fit it, and a first-order lag on that input would be named instead). Tested through the output sensitivity to d at
-d = 0; estimated by a profile search (weighted SSE over integer delays, a parabola through the best
-one and its neighbours for the fractional part), then one refit of all free parameters at that delay;
-when the profile's best is below a quarter sample, from the added-term test's joint estimate instead."""
+delay: a common delay cannot fit it, and a first-order lag on that input would be named instead).
+
+Tested through the output sensitivity to d at d = 0, and, since that linearisation has little power for
+a delay of many samples, by the likelihood ratio of each hypothesis' refit (``engine._lr_screen``; the
+searched delay counted as a second χ² degree of freedom). Estimated by a profile search (weighted SSE
+over integer delays, a parabola through the best one and its neighbours for the fractional part), then
+one refit of all free parameters at that delay; when the profile's best is below a quarter sample,
+from the added-term test's joint estimate instead."""
 
 import numpy as np
 
@@ -22,13 +26,12 @@ class InputDelay(Family):
         if ctx.model.delay is not None or not ctx.model.inputs:
             return []
         name = fresh_name(ctx.model, "input_delay_s")
-        # the delay of every input is also refitted at once and tested by the likelihood ratio
-        # (engine._lr_screen), its delay counted twice in the χ² degrees of freedom for the profile
-        # search over [0, max_delay_s] (module docstring)
-        out = [Hypothesis(self.id, "input_delay", coefs=[name],
-                          info={"step": 0.5 * ctx.dt, "lr_screen": True, "lr_extra_dof": 1})]
+        # each delay is also refitted at once and tested by the likelihood ratio (engine._lr_screen), its
+        # delay counted twice in the χ² degrees of freedom for the profile search over [0, max_delay_s]
+        info = {"step": 0.5 * ctx.dt, "lr_screen": True, "lr_extra_dof": 1}
+        out = [Hypothesis(self.id, "input_delay", coefs=[name], info=dict(info))]
         if len(ctx.model.inputs) > 1:
-            out += [Hypothesis(self.id, f"input_delay:{u}", coefs=[name], input=u, info={"step": 0.5 * ctx.dt})
+            out += [Hypothesis(self.id, f"input_delay:{u}", coefs=[name], input=u, info=dict(info))
                     for u in ctx.model.inputs]
         return out
 
