@@ -112,8 +112,9 @@ def read_csv(path: Path, spec: ReadSpec, needed: dict[str, str], time: str | Non
     cols = {name: positions[name][0] for name in needed}
     # every row is read against the header's fields (pandas would take their number from the first
     # data row: a short first row failed inside pandas); a longer row is a parser error naming its line
+    # (with ``usecols`` pandas drops a row's extra fields without a word, so every column is read)
     return _convert(path, f, key, spec, cols, time, sep=delim, skiprows=line_no + 1,
-                    names=list(range(len(header))), usecols=sorted(set(cols.values())), index_col=False)
+                    names=list(range(len(header))), index_col=False)
 
 
 def read_table(path: Path, spec: ReadSpec, needed: dict[str, str], time: str | None,

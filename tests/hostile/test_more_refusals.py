@@ -50,6 +50,18 @@ def test_a_csv_whose_first_data_row_is_short_names_the_missing_cells(tmp_path, c
     assert not (tmp_path / "o").exists()
 
 
+def test_a_csv_row_with_an_extra_field_is_refused_with_its_line(tmp_path, capsys):
+    """A row with one field more than the header (a stray delimiter or value) was read with the extra
+    field silently dropped: the other cells may then be shifted against their names."""
+    c = _demo(tmp_path)
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    lines[50] += ",7.0"
+    (tmp_path / "d.csv").write_text("\n".join(lines) + "\n")
+    rc, err = _cli(capsys, "diagnose", c, "--out", tmp_path / "o")
+    assert rc == 2 and "d.csv" in err and "Expected 3 fields in line 51, saw 4" in err, err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("scale, ok", [(1e60, True), (1e100, False), (1e300, False)])
 def test_huge_outputs_run_or_are_refused_with_the_column_named(tmp_path, capsys, scale, ok):
     c = _demo(tmp_path)
@@ -98,6 +110,7 @@ def test_a_run_folder_with_a_foreign_summary_layout_is_skipped_not_a_crash(tmp_p
     s["diagnosis"]["findings"] = ["x"]
     (run / "summary.json").write_text(json.dumps(s))
     (run / ".sysid-run").unlink()      # a marker-less folder (a legacy run's layout), its summary edited
+    (run / "simulation.csv").unlink()  # (legacy runs had no simulated series)
     assert main(["runs", "--root", str(tmp_path / "runs")]) == 0
     captured = capsys.readouterr()
     assert "Traceback" not in captured.err and "no runs" in captured.out

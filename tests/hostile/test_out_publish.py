@@ -61,6 +61,7 @@ def test_rerun_replaces_a_legacy_run_folder(tmp_path, reference):
     target = tmp_path / "run"
     shutil.copytree(ref_report, target)
     (target / ".sysid-run").unlink()
+    (target / "simulation.csv").unlink()   # legacy runs had no simulated series
     res = run_cli("diagnose", str(p.config), "--out", str(target), cwd=p.root)
     assert res.rc == 0, res.stderr[-2000:]
     assert _is_new_diagnose_run(target, ref_diag)
