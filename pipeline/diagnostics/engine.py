@@ -488,14 +488,15 @@ class Diagnoser:
             return None
 
     # -- one iteration -----------------------------------------------------------------------------
-    def context(self, fit: FitResult, f_hz: float | None) -> Context:
+    def context(self, fit: FitResult, f_hz: float | None, first_round: bool = False) -> Context:
         prob = self.prob
         return Context(fit.model, Structure.of(fit.model), prob.t, prob.U, prob.Y, prob.out_names,
                        states_full(fit.model, prob, fit.x0), prob.split.est, self.dt, f_hz, self.couplings,
-                       long_record=self._long(fit.model))
+                       long_record=self._long(fit.model), first_round=first_round)
 
-    def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult) -> tuple[list[Candidate], list]:
-        ctx = self.context(fit, f_hz)
+    def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult,
+                   first_round: bool = False) -> tuple[list[Candidate], list]:
+        ctx = self.context(fit, f_hz, first_round)
         out = []
         fams = [(fam, REGISTRY[fam].hypotheses(ctx)) for fam in self.families
                 if fam in REGISTRY and REGISTRY[fam].stage == "structural"]
@@ -997,7 +998,7 @@ class Diagnoser:
         for it in range(self.max_findings):
             tests, f_cyc = tests_of(current)
             fisher = strongest_fisher(tests)
-            cands, skipped = self.candidates(current, f_cyc / self.dt, fisher)
+            cands, skipped = self.candidates(current, f_cyc / self.dt, fisher, first_round=it == 0)
             fired = stats.holm({c.hyp.family: c.p_family for c in cands}, self.alpha)
             last_p = {c.hyp.family: c.p_family for c in cands}
             last_r2 = _family_r2(cands)

@@ -19,7 +19,11 @@ parameter's jump is therefore also refitted at its least-squares date and tested
 ratio with the effective sample size of the refit's residual, maximised over the date: Andrews' (1993)
 sup-LR, p from the James–James–Siegmund tail (:func:`pipeline.diagnostics.stats.sup_lr_break_p`) with
 the search's trimming ``LR_TRIM``; the family's p is Bonferroni over the Wald and the LR tests
-(``engine._lr_screen``)."""
+(``engine._lr_screen``). Only in the first round, on the nominal model: after a finding, the residual
+holds that extension's own approximation error (a Coulomb law fitted to a smoother friction), and a
+searched break date fits whatever non-stationarity that leaves (the bench's pendulum Coulomb records
+got a second finding, a jump of g_l); and each round's refits of every parameter cost about as much
+as the rest of the round."""
 
 from dataclasses import replace
 
@@ -59,7 +63,7 @@ class ParameterJump(Family):
             for i, g in enumerate(grid):
                 info = {"grid_step": float(grid[1] - grid[0]), "screen_group": k, "grid": tuple(float(x) for x in grid),
                         "scale": abs(m.params[k]) or 1.0}
-                if i == GRID // 2 and not ctx.long_record:
+                if i == GRID // 2 and ctx.first_round and not ctx.long_record:
                     # the jump of this parameter at its least-squares date, refitted at once and tested by
                     # the likelihood ratio maximised over the date (module docstring)
                     info.update(lr_screen=True, lr_law="break", trim=LR_TRIM)
