@@ -332,6 +332,20 @@ def equation_error_start(model: Model, prob: Problem) -> dict[str, float] | None
     return dict(zip(free, sol.x)) if np.all(np.isfinite(sol.x)) else None
 
 
+def _declared_output_check(model: Model, t: np.ndarray, U: np.ndarray, X: np.ndarray, names: list[str]) -> None:
+    """The states simulate but the fit's residual is not finite: name the declared output
+    (``model.outputs``) whose expression is not finite, and where, instead of blaming the parameters."""
+    with np.errstate(all="ignore"):
+        Y = outputs(model, t, U, X, names)
+    for j, name in enumerate(names):
+        bad = ~np.isfinite(Y[:, j])
+        if name not in model.states and bad.any():
+            k = int(np.argmax(bad))
+            raise SimulationError(f"{name!r} = {model.output_exprs[name].text!s} is {Y[k, j]} at t = {t[k]:.6g} s "
+                                  "with the initial parameter values (a division by zero, or a root or logarithm "
+                                  "of a negative number?)", key=f"model.outputs.{name}")
+
+
 def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | None = None,
                      max_nfev: int = 200, loss="linear", f_scale: float = 1.0,
                      sample_weights: np.ndarray | None = None, abandon_above: float | None = None,
@@ -423,6 +437,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             m0, x00 = unpack(th0)
             a, b = prob.fit_segment()
             why = simulate_states(m0, prob.t[a:stop], prob.U[a:stop], x00, bound=prob.bound)
+            if why.diverged_at is None:
+                _declared_output_check(m0, prob.t[a:stop], prob.U[a:stop], why.X, prob.out_names)
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
             raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
                                   "(model.params, model.initial)")

@@ -134,6 +134,8 @@ def _analyse(lc: LoadedConfig) -> RunContext:
     try:
         diag = dg.run(model, start=equation_error_start(model, prob))
     except SimulationError as exc:  # name the config: the parameters or equations are the cause
+        if exc.key:                 # a key of its own (a declared output): keep it
+            raise in_file(exc, str(lc.path)) from None
         raise SimulationError(str(exc), file=str(lc.path), key="model") from None
     comparison = None
     if lc.cfg.structures is not None:

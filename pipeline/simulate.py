@@ -636,7 +636,8 @@ def outputs(model: Model, t: np.ndarray, U: np.ndarray, X: np.ndarray, names: li
             f = vectorize(ex, args)
             vals = [X[:, i] for i in range(len(model.states))] + [U[:, j] for j in range(len(model.inputs))]
             vals += [model.params[k] for k in model.params] + [t]
-            y = np.broadcast_to(np.asarray(f(*vals), float), t.shape).copy()
+            with np.errstate(all="ignore"):   # a non-finite output is the caller's to judge (fit: a penalty)
+                y = np.broadcast_to(np.asarray(f(*vals), float), t.shape).copy()
         for term in model.terms:
             if term.is_output and term.target == name:
                 y = y + model.params[term.coef] * term_on(model, term, X, U, t)

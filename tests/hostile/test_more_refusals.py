@@ -62,6 +62,20 @@ def test_a_csv_row_with_an_extra_field_is_refused_with_its_line(tmp_path, capsys
     assert not (tmp_path / "o").exists()
 
 
+def test_a_declared_output_that_divides_by_zero_is_named(tmp_path, capsys):
+    """The states simulate, the declared output x/z does not (z = 0): the message blamed "model.params,
+    model.initial" and numpy printed two RuntimeWarnings; it now names model.outputs.y and where."""
+    c = _demo(tmp_path)
+    cfg = yaml.safe_load(c.read_text())
+    cfg["model"]["params"]["z"] = 0.0
+    cfg["model"]["outputs"] = {"y": "x/z"}
+    cfg["data"]["outputs"] = {"x": "y"}
+    c.write_text(yaml.safe_dump(cfg))
+    rc, err = _cli(capsys, "diagnose", c, "--out", tmp_path / "o")
+    assert rc == 2 and "model.outputs.y" in err and "x/z" in err and "t = 0 s" in err, err
+    assert "RuntimeWarning" not in err and not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("scale, ok", [(1e60, True), (1e100, False), (1e300, False)])
 def test_huge_outputs_run_or_are_refused_with_the_column_named(tmp_path, capsys, scale, ok):
     c = _demo(tmp_path)
