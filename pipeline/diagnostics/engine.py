@@ -477,13 +477,9 @@ class Diagnoser:
             cand.reason = "refit failed " + "; ".join(why)[:600]
         return best
 
-    def estimate(self, fit: FitResult, cand: Candidate, lr: bool = False) -> FitResult | None:
-        """The candidate's refit: the family's search (``estimate``; ``lr_estimate`` for the
-        likelihood-ratio screen when the family has a cheaper one) or the generic refit."""
+    def estimate(self, fit: FitResult, cand: Candidate) -> FitResult | None:
         fam = REGISTRY[cand.hyp.family]
         try:
-            if lr and hasattr(fam, "lr_estimate"):
-                return fam.lr_estimate(self, fit, cand)
             if hasattr(fam, "estimate"):
                 return fam.estimate(self, fit, cand)
             return self.refit(fit, cand)
@@ -680,7 +676,7 @@ class Diagnoser:
         started from that test's estimate."""
         S = self.sensitivity(fit, h, X)
         wr = None if S is None else self.statistic(fit, S)
-        return wr, self.estimate(fit, Candidate(h, wr, 1.0, []), lr=True)
+        return wr, self.estimate(fit, Candidate(h, wr, 1.0, []))
 
     def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate,
                    done: dict | None = None) -> Candidate:
@@ -728,12 +724,6 @@ class Diagnoser:
             cand.evidence.append({"test": f"likelihood_ratio_neff[{lr_h.key}]", "statistic": lr.statistic,
                                   "p_value": lr.p_value, "detail": lr.detail})
             out = cand
-        if out is not best and hasattr(REGISTRY[fam], "lr_estimate"):
-            # the screen's refit was the family's cheaper one (a jump's dates ranked with the other
-            # parameters held): the candidate that goes on gets the family's own search
-            full = self.estimate(fit, Candidate(out.hyp, out.wald, 1.0, []))
-            if full is not None and full.sse_w <= out.fit.sse_w:
-                out.fit = full
         return out
 
     def _xcorr_lag(self, fit: FitResult, input_name: str | None = None) -> dict:

@@ -73,28 +73,16 @@ class ParameterJump(Family):
         return out
 
     def estimate(self, dg, fit, cand):
-        return self._search(dg, fit, cand, quick=False)
-
-    def lr_estimate(self, dg, fit, cand):
-        """The likelihood-ratio screen's refit (every free parameter, in the first round): the grid of
-        dates is ranked by fits of the jump alone, the other parameters held at the current fit's
-        values (one-parameter fits, a fraction of the simulations); the golden-section search between
-        the best date's neighbours and the final refit free every parameter, as :meth:`estimate`."""
-        return self._search(dg, fit, cand, quick=True)
-
-    def _search(self, dg, fit, cand, quick: bool):
         hyp = cand.hyp
         tj_name = next(iter(hyp.extra_params))
         step = hyp.info["grid_step"]
         d0 = float(cand.wald.beta[0])
 
-        def refit(tj, only_jump=False, **fit_kw):
+        def refit(tj, **fit_kw):
             h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
-            m = self.extend(fit.model, h, {hyp.coefs[0]: d0})
-            if only_jump:
-                m = replace(m, free=(hyp.coefs[0],))
             try:
-                return fit_output_error(m, dg.prob, start=estimated_x0(fit), max_nfev=60, **fit_kw)
+                return fit_output_error(self.extend(fit.model, h, {hyp.coefs[0]: d0}), dg.prob, start=estimated_x0(fit), max_nfev=60,
+                                        **fit_kw)
             except Exception as exc:  # noqa: BLE001 - re-raised below unless it is a simulation failure
                 from ...errors import InputError
                 if isinstance(exc, InputError):
@@ -107,7 +95,7 @@ class ParameterJump(Family):
         near = list(hyp.info.get("grid", [hyp.extra_params[tj_name]]))
         e0, e1 = dg.prob.split.est
         ftol = min(GRID_FTOL, GRID_FTOL_BIC / ((e1 - e0) * dg.prob.Y.shape[1]))
-        fits = [refit(tj, only_jump=quick, ftol=ftol) for tj in near]
+        fits = [refit(tj, ftol=ftol) for tj in near]
         k = int(np.argmin([np.inf if f is None else f.sse_w for f in fits]))
         t0 = near[k]
         a, b = t0 - step, t0 + step
