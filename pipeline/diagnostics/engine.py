@@ -515,8 +515,11 @@ class Diagnoser:
 
         # a likelihood-ratio screen's hypothesis (_lr_screen) gets its test and its refit in one job, the
         # round's longest: submitted first, it runs beside the other tests instead of after them on one core
-        lr_hyps = [h for h in flat if h.info.get("lr_screen")]
-        rest = [h for h in flat if not h.info.get("lr_screen")]
+        # a lazy one (``info['lr_lazy']``: a date search per parameter, as costly as the rest of the round)
+        # is tested as the others are, and refitted for its LR test only when no family is significant
+        # (:meth:`_lazy_lr`): the LR screen looks harder where the linearised tests found nothing
+        lr_hyps = [h for h in flat if h.info.get("lr_screen") and not h.info.get("lr_lazy")]
+        rest = [h for h in flat if not h.info.get("lr_screen") or h.info.get("lr_lazy")]
         with ThreadPoolExecutor(max_workers=max(1, min(len(flat), os.cpu_count() or 1))) as pool:
             lr_jobs = [pool.submit(self._lr_refit, fit, h, ctx.X) for h in lr_hyps]
             both = list(pool.map(sens_and_test, rest))
@@ -566,7 +569,28 @@ class Diagnoser:
                 tie = [replace(c, places=best.places) for c in self._near_tie(fit, h, wr, sig, best.p_family)]
                 out += tie
                 best.alternates = self._alternates(h, wr, sig, [c.hyp for c in tie])
-        return out, ctx.skipped
+        return self._lazy_lr(fit, ctx, fams, results, out), ctx.skipped
+
+    def _lazy_lr(self, fit: FitResult, ctx: Context, fams: list, results: dict, out: list[Candidate]) -> list[Candidate]:
+        """When no family is significant after Holm correction, the families' lazy likelihood-ratio
+        hypotheses (``info['lr_lazy']``) are refitted (in threads) and their families' candidates pass
+        :meth:`_lr_screen` again with them."""
+        lazy = [h for _, hyps in fams for h in hyps if h.info.get("lr_lazy")]
+        firsts = [c for c in out if not c.runner_up]
+        if not lazy or any(stats.holm({c.hyp.family: c.p_family for c in firsts}, self.alpha).values()):
+            return out
+        with ThreadPoolExecutor(max_workers=max(1, min(len(lazy), os.cpu_count() or 1))) as pool:
+            done = dict(zip([id(h) for h in lazy], pool.map(lambda h: self._lr_refit(fit, h, ctx.X), lazy)))
+        res = dict(results)
+        res.update({k: wr for k, (wr, _) in done.items()})
+        refits = {k: f for k, (_, f) in done.items()}
+        for fam, hyps in fams:
+            if not any(h.info.get("lr_lazy") for h in hyps):
+                continue
+            i = next((j for j, c in enumerate(out) if c.hyp.family == fam and not c.runner_up), None)
+            if i is not None:
+                out[i] = self._lr_screen(fit, fam, hyps, res, out[i], refits)
+        return out
 
     FALLBACK_SHARE = 0.5   # after a failed refit: the family's hypotheses explaining this share of its
     MAX_FALLBACKS = 3      # representative's, at most this many, are refitted instead
@@ -689,7 +713,7 @@ class Diagnoser:
         Wald test and these k tests, (k + 1)·min(p), and the candidate is the one whose test is smallest
         (its refit kept) if its refit explains at least ``MATERIAL_R2`` of the residual. ``done``: the refits
         :meth:`_lr_refit` computed beside the other tests."""
-        lr_hs = [h for h in hyps if h.info.get("lr_screen")]
+        lr_hs = [h for h in hyps if h.info.get("lr_screen") and (not h.info.get("lr_lazy") or (done and id(h) in done))]
         if not lr_hs:
             return best
         k = len(lr_hs) + 1
