@@ -589,7 +589,9 @@ class Diagnoser:
                 continue
             i = next((j for j, c in enumerate(out) if c.hyp.family == fam and not c.runner_up), None)
             if i is not None:
-                out[i] = self._lr_screen(fit, fam, hyps, res, out[i], refits)
+                new = self._lr_screen(fit, fam, hyps, res, out[i], refits)
+                new.places = out[i].places
+                out[i] = new
         return out
 
     FALLBACK_SHARE = 0.5   # after a failed refit: the family's hypotheses explaining this share of its
@@ -729,8 +731,9 @@ class Diagnoser:
             # longer lags (a jump fitted to 0.24 % of a Coulomb model's residual: LR p = 6e-5)
             if f is None or f.sse_w > (1.0 - MATERIAL_R2) * fit.sse_w:
                 continue
-            lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
-            if lr_h.info.get("lr_law") == "break":
+            if lr_h.info.get("lr_law") != "break":
+                lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
+            else:
                 lr = lr_against(fit, f, self.alpha)
                 trim = float(lr_h.info["trim"])
                 lr = replace(lr, p_value=stats.sup_lr_break_p(lr.statistic, trim),
