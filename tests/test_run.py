@@ -19,14 +19,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "demo.yaml"
 
 
-@pytest.fixture(scope="module")
-def demo_runs(tmp_path_factory):
-    base = tmp_path_factory.mktemp("demo")
-    assert main(["report", str(DEMO), "--out", str(base / "a")]) == 0
-    assert main(["diagnose", str(DEMO), "--out", str(base / "b")]) == 0
-    return base / "a", base / "b"
-
-
 def test_demo_names_cubic_stiffness(demo_runs):
     s = json.loads((demo_runs[0] / "summary.json").read_text())
     assert s["schema"] == "sysid-summary/1"

@@ -19,15 +19,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "demo.yaml"      # mass-spring-damper with a hidden cubic stiffness: one finding
 
 
-@pytest.fixture(scope="module")
-def demo_runs(tmp_path_factory):
-    """The demo through both commands: ``report`` (with HTML) and ``diagnose``."""
-    base = tmp_path_factory.mktemp("series")
-    assert main(["report", str(DEMO), "--out", str(base / "a")]) == 0
-    assert main(["diagnose", str(DEMO), "--out", str(base / "b")]) == 0
-    return base / "a", base / "b"
-
-
 def _read(folder: Path) -> tuple[pd.DataFrame, dict]:
     return pd.read_csv(folder / "simulation.csv"), json.loads((folder / "summary.json").read_text())
 

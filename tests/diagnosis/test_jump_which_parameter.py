@@ -28,62 +28,57 @@ from pipeline.runs import analyse
 DT, N, TJ = 0.1, 2000, 120.0
 
 
-def _record(path: Path, seed: int) -> None:
-    """Held levels U(0, 2) for 20–80 samples (the probe's draw order), exact zero-order-hold response,
-    white noise of 2 % of std(T) from its own stream."""
+def _record(path: Path, seed: int, probe_streams: bool = False) -> None:
+    """Held levels U(0, 2) for 20–80 samples, the exact zero-order-hold response of T' = −a T + u with a
+    jumping 0.5 → 0.8 at TJ (a sample time), white noise of 2 % of std(T). ``probe_streams``: the
+    probe's draws (each level before its hold; the noise from its own stream seed + 1000), which
+    reproduce its record ``th_jump_lo`` for seed 112; otherwise hold first and one stream."""
     rng = np.random.default_rng(seed)
     u = np.empty(N)
     k = 0
     while k < N:
-        level = rng.uniform(0.0, 2.0)
-        h = int(rng.integers(20, 81))
+        if probe_streams:
+            level = rng.uniform(0.0, 2.0)
+            h = int(rng.integers(20, 81))
+        else:
+            h = int(rng.integers(20, 81))
+            level = rng.uniform(0.0, 2.0)
         u[k:k + h] = level
         k += h
     t = np.arange(N) * DT
     T = np.zeros(N)
-    for k in range(N - 1):   # exact over a sample interval with u held and a constant (TJ is a sample time)
+    for k in range(N - 1):   # exact over a sample interval with u held and a constant
         a = 0.5 if t[k] < TJ else 0.8
         e = np.exp(-a * DT)
-        T[k + 1] = T[k] * e + (1.0 * u[k] / a) * (1.0 - e)
-    y = T + 0.02 * T.std() * np.random.default_rng(seed + 1000).standard_normal(N)
+        T[k + 1] = T[k] * e + (u[k] / a) * (1.0 - e)
+    noise = np.random.default_rng(seed + 1000) if probe_streams else rng
+    y = T + 0.02 * T.std() * noise.standard_normal(N)
     pd.DataFrame({"t": t, "u": u, "T": y}).to_csv(path, index=False)
 
 
-@pytest.mark.parametrize("seed", [112])
-def test_a_jump_of_the_loss_coefficient_is_not_named_a_jump_of_the_input_gain(tmp_path, seed):
-    _record(tmp_path / "th.csv", seed)
+def _first_finding(tmp_path: Path, start: dict[str, float]) -> dict:
+    """The first finding of a diagnosis of ``th.csv`` with the user's linear model from ``start``."""
     cfg = {"name": "thermal", "seed": 0,
            "data": {"path": "th.csv", "time": "t", "inputs": ["u"], "outputs": ["T"], "intersample": "zoh"},
-           "model": {"states": ["T"], "inputs": ["u"], "params": {"a": 0.55, "b": 1.1}, "free": ["a", "b"],
+           "model": {"states": ["T"], "inputs": ["u"], "params": start, "free": ["a", "b"],
                      "equations": {"T": "-a*T + b*u"}, "initial": {"T": 0.0}},
            "diagnose": {"families": "all", "alpha": 0.01, "max_findings": 3}}
     (tmp_path / "th.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     with contextlib.redirect_stderr(io.StringIO()):
         s = analyse(load_config(tmp_path / "th.yaml")).summary
     f = s["diagnosis"]["findings"]
-    assert f and f[0]["family"] == "parameter_jump", s["diagnosis"]["verdict"]
-    assert f[0]["parameter"] == "a", f[0]["description"]
-    assert abs(f[0]["time_s"] - TJ) <= 0.05 * N * DT
-    assert f[0]["before"] == pytest.approx(0.5, rel=0.2) and f[0]["after"] == pytest.approx(0.8, rel=0.2)
+    assert f, s["diagnosis"]["verdict"]
+    return f[0]
 
 
-def _closed_form_record(path: Path, seed: int) -> None:
-    """The same plant and jump with another input stream (levels first drawn after the hold)."""
-    rng = np.random.default_rng(seed)
-    u = np.empty(N)
-    k = 0
-    while k < N:
-        h = int(rng.integers(20, 81))
-        u[k:k + h] = rng.uniform(0.0, 2.0)
-        k += h
-    t = np.arange(N) * DT
-    T = np.zeros(N)
-    for k in range(N - 1):
-        a = 0.5 if t[k] < TJ else 0.8
-        e = np.exp(-a * DT)
-        T[k + 1] = T[k] * e + (u[k] / a) * (1.0 - e)
-    y = T + 0.02 * T.std() * rng.standard_normal(N)
-    pd.DataFrame({"t": t, "u": u, "T": y}).to_csv(path, index=False)
+@pytest.mark.parametrize("seed", [112])
+def test_a_jump_of_the_loss_coefficient_is_not_named_a_jump_of_the_input_gain(tmp_path, seed):
+    _record(tmp_path / "th.csv", seed, probe_streams=True)
+    f = _first_finding(tmp_path, {"a": 0.55, "b": 1.1})
+    assert f["family"] == "parameter_jump", f["description"]
+    assert f["parameter"] == "a", f["description"]
+    assert abs(f["time_s"] - TJ) <= 0.05 * N * DT
+    assert f["before"] == pytest.approx(0.5, rel=0.2) and f["after"] == pytest.approx(0.8, rel=0.2)
 
 
 @pytest.mark.parametrize("seed", [7, 9, 11])
@@ -93,16 +88,8 @@ def test_a_late_jump_is_detected_by_the_sup_likelihood_ratio(tmp_path, seed):
     records (seeds 1–14; these three among them: colored noise or nothing was named). With the
     likelihood-ratio screen maximised over the date (engine._lr_screen, stats.sup_lr_break_p) all 14
     name the jump of a within 0.1 s."""
-    _closed_form_record(tmp_path / "th.csv", seed)
-    cfg = {"name": "thermal", "seed": 0,
-           "data": {"path": "th.csv", "time": "t", "inputs": ["u"], "outputs": ["T"], "intersample": "zoh"},
-           "model": {"states": ["T"], "inputs": ["u"], "params": {"a": 0.4, "b": 0.9}, "free": ["a", "b"],
-                     "equations": {"T": "-a*T + b*u"}, "initial": {"T": 0.0}},
-           "diagnose": {"families": "all", "alpha": 0.01, "max_findings": 3}}
-    (tmp_path / "th.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
-    with contextlib.redirect_stderr(io.StringIO()):
-        s = analyse(load_config(tmp_path / "th.yaml")).summary
-    f = s["diagnosis"]["findings"]
-    assert f and (f[0]["family"], f[0]["parameter"]) == ("parameter_jump", "a"), [x["family"] for x in f]
-    assert abs(f[0]["time_s"] - TJ) <= 0.05 * N * DT
-    assert any(e["test"].startswith("likelihood_ratio_neff") and "sup-LR" in e["detail"] for e in f[0]["evidence"])
+    _record(tmp_path / "th.csv", seed)
+    f = _first_finding(tmp_path, {"a": 0.4, "b": 0.9})
+    assert (f["family"], f.get("parameter")) == ("parameter_jump", "a"), f["description"]
+    assert abs(f["time_s"] - TJ) <= 0.05 * N * DT
+    assert any(e["test"].startswith("likelihood_ratio_neff") and "sup-LR" in e["detail"] for e in f["evidence"])
