@@ -158,15 +158,18 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     return r if r.shape[1] == 1 else r / output_scales(prob)
 
 
-def lr_against(current: FitResult, refit: FitResult, alpha: float, searched: int = 0) -> stats.TestResult:
+def lr_against(current: FitResult, refit: FitResult, alpha: float, searched: int = 0,
+               break_trim: float | None = None) -> stats.TestResult:
     """The likelihood-ratio test of ``refit`` against the ``current`` model it extends, on the estimation
     part, with the effective sample size from the **refit's** residual (:func:`stats.lr_test`: the
     current residual carries the missing effect itself and would leave N_eff < 1 on a large smooth one).
     ``searched``: parameters the family estimated by a search and held fixed in the refit (a jump's
     time), counted in the degrees of freedom: a conservative stand-in for the supremum-LR law of an
-    estimated change point (Andrews 1993, Econometrica 61(4)), which is more spread than χ²₁."""
+    estimated change point (Andrews 1993, Econometrica 61(4)), which is more spread than χ²₁;
+    ``break_trim``: that law itself (:func:`stats.sup_lr_break_p`) for one coefficient's jump."""
     return stats.lr_test(current.sse_w, refit.sse_w, current.resid_est.size,
-                         refit.n_params - current.n_params + searched, stats.lag1(refit.resid_est), alpha)
+                         refit.n_params - current.n_params + searched, stats.lag1(refit.resid_est), alpha,
+                         break_trim=break_trim)
 
 
 def _pooled(g: dict, ny: int) -> dict:
@@ -731,21 +734,16 @@ class Diagnoser:
             # longer lags (a jump fitted to 0.24 % of a Coulomb model's residual: LR p = 6e-5)
             if f is None or f.sse_w > (1.0 - MATERIAL_R2) * fit.sse_w:
                 continue
-            if lr_h.info.get("lr_law") != "break":
-                lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
+            if lr_h.info.get("lr_law") == "break":
+                lr = lr_against(fit, f, self.alpha, break_trim=float(lr_h.info["trim"]))
             else:
-                lr = lr_against(fit, f, self.alpha)
-                trim = float(lr_h.info["trim"])
-                lr = replace(lr, p_value=stats.sup_lr_break_p(lr.statistic, trim),
-                             detail=lr.detail.replace("~ chi2(1)", f"maximised over the break date "
-                                                      f"(sup-LR, trimming {trim:.3g}; James, James & Siegmund 1987)"))
+                lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
             p = min(1.0, k * lr.p_value)
             if p >= out.p_family:
                 continue
             cand.fit, cand.p_family = f, p
             if wr is not None:
-                cand.evidence.append({"test": f"added_term_wald[{lr_h.key}]", "statistic": wr.statistic,
-                                      "p_value": wr.p_value, "dof": wr.dof})
+                cand.evidence.append(_wald_evidence(lr_h, wr))
             else:
                 cand.wald = best.wald
             cand.evidence.append({"test": f"likelihood_ratio_neff[{lr_h.key}]", "statistic": lr.statistic,

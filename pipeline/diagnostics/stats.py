@@ -454,7 +454,8 @@ def _ar_filter(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     return out
 
 
-def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float = 0.01) -> TestResult:
+def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float = 0.01,
+            break_trim: float | None = None) -> TestResult:
     """Likelihood-ratio test of a refit with q more parameters against the current model, with the
     effective sample size of an AR(1) residual.
 
@@ -468,7 +469,10 @@ def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float =
     coincide, and the size stays ≤ 1.5 α (Monte Carlo in ``tests/diagnosis/test_mc_calibration.py``).
     Under the alternative the current model's residual carries the missing effect itself: a large,
     smooth misfit (a periodic disturbance of 190 samples per cycle) has lag-1 autocorrelation 0.9995,
-    N_eff fell below one sample and a 98 % validation gain was rejected (p = 0.052)."""
+    N_eff fell below one sample and a 98 % validation gain was rejected (p = 0.052).
+
+    ``break_trim``: the refit adds one coefficient's jump at a date searched over [trim, 1 − trim] of
+    the sample; the p-value is then :func:`sup_lr_break_p`'s (``q`` is not used)."""
     r = float(min(max(rho, 0.0), 0.999)) if math.isfinite(rho) else 0.0
     n_eff = n * (1.0 - r) / (1.0 + r)
     if rss1 <= 0 or rss0 <= 0:
@@ -477,10 +481,15 @@ def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float =
         stat = float(max(0.0, n_eff * math.log(rss0 / rss1)))
     # q = 0 (an alternative with as many parameters, e.g. another input interpolation): no χ² law;
     # any fall of the RSS is the better fit (the ΔBIC < 0 rule for equal parameter counts)
-    p = float(stats.chi2.sf(stat, q)) if q > 0 else (0.0 if stat > 0 else 1.0)
+    if break_trim is not None:   # one coefficient's jump, its date searched: the sup-LR law
+        p = sup_lr_break_p(stat, break_trim)
+        law = (f"maximised over the break date (sup-LR, trimming {break_trim:.3g}; James, James & "
+               "Siegmund 1987)")
+    else:
+        p = float(stats.chi2.sf(stat, q)) if q > 0 else (0.0 if stat > 0 else 1.0)
+        law = f"~ chi2({q})"
     return TestResult("likelihood_ratio_neff", stat, p, float(stats.chi2.isf(alpha, max(q, 1))), p >= alpha,
-                      f"N_eff ln(RSS0/RSS1) ~ chi2({q}), N = {n}, lag-1 autocorrelation {r:.3g}, "
-                      f"N_eff = {n_eff:.1f}")
+                      f"N_eff ln(RSS0/RSS1) {law}, N = {n}, lag-1 autocorrelation {r:.3g}, N_eff = {n_eff:.1f}")
 
 
 def sup_lr_break_p(stat: float, trim: float) -> float:
