@@ -121,3 +121,22 @@ def test_csv_format_numbers_nan_and_quoted_names():
     assert raw == b't,part,record,y\n0,estimation,"run 1, ""cold""",0.3333333333\n0.1,validation,plain,nan\n'
     d = pd.read_csv(io.BytesIO(raw))
     assert d["record"].tolist() == ['run 1, "cold"', "plain"] and math.isnan(d["y"][1])
+
+
+def test_an_input_named_like_a_column_gets_its_role_appended(tmp_path):
+    """An input called ``part`` (a plausible name for a feed) must not repeat the ``part`` header:
+    pandas would read the input as ``part.1`` and a user's ``d["part"]`` would be the labels."""
+    raw = pd.read_csv(ROOT / "data" / "demo.csv").rename(columns={"u": "part"})
+    raw.to_csv(tmp_path / "d.csv", index=False)
+    cfg = yaml.safe_load(DEMO.read_text())
+    cfg["data"].update(path="d.csv", inputs=["part"])
+    cfg["model"]["inputs"] = ["part"]
+    cfg["model"]["equations"]["v"] = "(part - c*v - k*x)/m"
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["diagnose", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
+    header = (tmp_path / "run" / "simulation.csv").read_text().split("\n", 1)[0].split(",")
+    assert header == ["t", "part", "part_input", "x", "x_nominal", "x_final"]
+    d, s = _read(tmp_path / "run")
+    np.testing.assert_allclose(d["part_input"].to_numpy(), raw["part"].to_numpy(), rtol=1e-9)
+    assert set(d["part"]) == {"estimation", "validation"}
+    _assert_rmse_matches_summary(d, s)
