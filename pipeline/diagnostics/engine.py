@@ -572,16 +572,53 @@ class Diagnoser:
                 tie = [replace(c, places=best.places) for c in self._near_tie(fit, h, wr, sig, best.p_family)]
                 out += tie
                 best.alternates = self._alternates(h, wr, sig, [c.hyp for c in tie])
+        self._round = (fit, ctx, fams, results)
         return self._lazy_lr(fit, ctx, fams, results, out), ctx.skipped
 
-    def _lazy_lr(self, fit: FitResult, ctx: Context, fams: list, results: dict, out: list[Candidate]) -> list[Candidate]:
-        """When no family is significant after Holm correction, the families' lazy likelihood-ratio
-        hypotheses (``info['lr_lazy']``) are refitted (in threads) and their families' candidates pass
-        :meth:`_lr_screen` again with them."""
+    def _weigh(self, c: Candidate, current: FitResult, before: np.ndarray, bic0: float, rng) -> None:
+        """A refitted candidate's held-out gain, ΔBIC and likelihood-ratio test against ``current``, and
+        its acceptance: the gain's 95 % lower bound above 0 and LR p below α."""
+        if c.fit is None:
+            c.reason = c.reason or "no extension estimated"
+            return
+        c.gain = _pooled(gain_ci(before, gain_resid(c.fit, self.prob), rng, self.n_boot), before.shape[1])
+        c.delta_bic = bic_of(c.fit, len(c.hyp.searched)) - bic0
+        lr = c.lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
+        c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
+        c.reason = "accepted" if c.accepted else (
+            "validation error not lower with 95 % confidence" + unbounded_note(c.gain) if c.gain["ci95"][0] <= 0
+            else f"estimation fit not better by the likelihood-ratio test with the effective sample size "
+                 f"(p = {lr.p_value:.3g}; {lr.detail})")
+        _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
+             f"{c.gain['ci95'][1]:+.3f}, dBIC {c.delta_bic:+.1f} -> {c.reason}")
+
+    def second_chance(self, fit: FitResult, out: list[Candidate]) -> list[Candidate]:
+        """The round's lazy likelihood-ratio screen (:meth:`_lazy_lr`) after all, when some family was
+        significant (so it did not run) but no candidate was accepted: the candidates of the families it
+        changed (a new p-value and refit), to be weighed as the round's were. Empty when it ran already,
+        or has nothing to add. On a thermal record whose loss coefficient jumps 0.5 -> 0.9 at 80 s, a
+        drift of a was significant and rejected (LR p 0.13, N_eff 2.5), the jump's Wald test was not, and
+        the run ended unexplained with the jump never refitted."""
+        r = getattr(self, "_round", None)
+        if r is None or r[0] is not fit:
+            return []
+        _, ctx, fams, results = r
+        self._round = None
+        new = self._lazy_lr(fit, ctx, fams, results, list(out), force=True)
+        return [c for c, o in zip(new, out) if c is not o]
+
+    def _lazy_lr(self, fit: FitResult, ctx: Context, fams: list, results: dict, out: list[Candidate],
+                 force: bool = False) -> list[Candidate]:
+        """When no family is significant after Holm correction (or ``force``, :meth:`second_chance`), the
+        families' lazy likelihood-ratio hypotheses (``info['lr_lazy']``) are refitted (in threads) and
+        their families' candidates pass :meth:`_lr_screen` again with them."""
         lazy = [h for _, hyps in fams for h in hyps if h.info.get("lr_lazy")]
         firsts = [c for c in out if not c.runner_up]
-        if not lazy or any(stats.holm({c.hyp.family: c.p_family for c in firsts}, self.alpha).values()):
+        if not lazy:
             return out
+        if not force and any(stats.holm({c.hyp.family: c.p_family for c in firsts}, self.alpha).values()):
+            return out
+        self._round = None          # ran: no second chance
         with ThreadPoolExecutor(max_workers=max(1, min(len(lazy), os.cpu_count() or 1))) as pool:
             done = dict(zip([id(h) for h in lazy], pool.map(lambda h: self._lr_refit(fit, h, ctx.X), lazy)))
         res = dict(results)
@@ -1053,24 +1090,28 @@ class Diagnoser:
             cands += extra
             todo += extra
             for c in todo:
-                if c.fit is None:
-                    c.reason = c.reason or "no extension estimated"
-                    continue
-                c.gain = _pooled(gain_ci(before, gain_resid(c.fit, prob), rng, self.n_boot), before.shape[1])
-                c.delta_bic = bic_of(c.fit, len(c.hyp.searched)) - bic0
-                lr = c.lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
-                c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
-                c.reason = "accepted" if c.accepted else (
-                    "validation error not lower with 95 % confidence" + unbounded_note(c.gain) if c.gain["ci95"][0] <= 0
-                    else f"estimation fit not better by the likelihood-ratio test with the effective sample size "
-                         f"(p = {lr.p_value:.3g}; {lr.detail})")
-                _log(f"  {c.hyp.key}: gain {c.gain['relative']:+.3f} ci {c.gain['ci95'][0]:+.3f}.."
-                     f"{c.gain['ci95'][1]:+.3f}, dBIC {c.delta_bic:+.1f} -> {c.reason}")
+                self._weigh(c, current, before, bic0, rng)
             inter = None
             if inter_job is not None:
                 f_is, finding_is, hist = inter_job.result()
                 if finding_is is not None:
                     inter = (f_is, finding_is)
+            if inter is None and not any(c.accepted for c in cands):
+                more = self.second_chance(current, cands)
+                if more:
+                    _log(f"  nothing accepted: likelihood-ratio screen of {[c.hyp.family for c in more]}")
+                    swap = {c.hyp.family: c for c in more}
+                    cands = [swap.pop(c.hyp.family) if not c.runner_up and c.hyp.family in swap else c
+                             for c in cands]
+                    last_p = {c.hyp.family: c.p_family for c in cands if not c.runner_up}
+                    fired = stats.holm(last_p, self.alpha)
+                    for c in more:
+                        if not fired[c.hyp.family]:
+                            c.reason = "not significant after Holm correction (likelihood-ratio screen)"
+                            continue
+                        if c.fit is None:
+                            c.fit = self.estimate(current, c)
+                        self._weigh(c, current, before, bic0, rng)
             rec = {"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]
                    + (hist["candidates"] if not switched else []),
                    "skipped": [{"family": f, "reason": r} for f, r in dict.fromkeys(skipped)]}

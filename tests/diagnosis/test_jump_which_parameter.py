@@ -28,9 +28,9 @@ from pipeline.runs import analyse
 DT, N, TJ = 0.1, 2000, 120.0
 
 
-def _record(path: Path, seed: int, probe_streams: bool = False) -> None:
+def _record(path: Path, seed: int, probe_streams: bool = False, tj: float = TJ, a1: float = 0.8) -> None:
     """Held levels U(0, 2) for 20–80 samples, the exact zero-order-hold response of T' = −a T + u with a
-    jumping 0.5 → 0.8 at TJ (a sample time), white noise of 2 % of std(T). ``probe_streams``: the
+    jumping 0.5 → ``a1`` at ``tj`` (a sample time), white noise of 2 % of std(T). ``probe_streams``: the
     probe's draws (each level before its hold; the noise from its own stream seed + 1000), which
     reproduce its record ``th_jump_lo`` for seed 112; otherwise hold first and one stream."""
     rng = np.random.default_rng(seed)
@@ -48,7 +48,7 @@ def _record(path: Path, seed: int, probe_streams: bool = False) -> None:
     t = np.arange(N) * DT
     T = np.zeros(N)
     for k in range(N - 1):   # exact over a sample interval with u held and a constant
-        a = 0.5 if t[k] < TJ else 0.8
+        a = 0.5 if t[k] < tj else a1
         e = np.exp(-a * DT)
         T[k + 1] = T[k] * e + (u[k] / a) * (1.0 - e)
     noise = np.random.default_rng(seed + 1000) if probe_streams else rng
@@ -110,3 +110,18 @@ def test_the_jump_date_is_resolved_to_the_simulations_own_resolution(tmp_path):
     f = _findings(tmp_path, {"a": 0.4, "b": 0.9})
     assert [(x["family"], x.get("parameter")) for x in f] == [("parameter_jump", "a")], [x["description"] for x in f]
     assert abs(f[0]["time_s"] - TJ) <= DT / 2
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_a_jump_is_screened_when_the_significant_family_is_rejected(tmp_path, seed):
+    """a 0.5 -> 0.9 at 80 s (the independent probe's ``th_jumpA``): on these seeds a drift of a was the
+    only significant family (the jump's Wald test was not) and was rejected (LR p 0.13 with N_eff 2.5;
+    on seed 5 an unbounded gain interval), so the lazy likelihood-ratio screen, which runs when nothing
+    is significant, never ran and the verdict was "unexplained" with no finding. When nothing of a
+    first round is accepted, the screen runs after all (``Diagnoser.second_chance``)."""
+    _record(tmp_path / "th.csv", seed, tj=80.0, a1=0.9)
+    f = _findings(tmp_path, {"a": 0.55, "b": 1.1})
+    assert (f[0]["family"], f[0].get("parameter")) == ("parameter_jump", "a"), f[0]["description"]
+    assert abs(f[0]["time_s"] - 80.0) <= DT / 2
+    assert f[0]["after"] == pytest.approx(0.9, rel=0.05)
+    assert any("sup-LR" in e.get("detail", "") for e in f[0]["evidence"])
