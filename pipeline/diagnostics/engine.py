@@ -242,6 +242,9 @@ class Diagnoser:
         self.max_delay = max_delay_s if max_delay_s is not None else 20 * dt
         self.w = prob.weights
         self._intersample_dropped: set[str] = set()
+        # the last candidates() round's (fit, context, families, test results), for second_chance; None
+        # once its lazy screen has run
+        self._round: tuple | None = None
 
     def _sim_change(self, fit: FitResult, alt: Model) -> float | None:
         """RMS change of the estimation-part simulation under ``alt`` (same parameters), relative to
@@ -599,7 +602,7 @@ class Diagnoser:
         or has nothing to add. On a thermal record whose loss coefficient jumps 0.5 -> 0.9 at 80 s, a
         drift of a was significant and rejected (LR p 0.13, N_eff 2.5), the jump's Wald test was not, and
         the run ended unexplained with the jump never refitted."""
-        r = getattr(self, "_round", None)
+        r = self._round
         if r is None or r[0] is not fit:
             return []
         _, ctx, fams, results = r

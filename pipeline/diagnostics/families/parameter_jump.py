@@ -146,7 +146,7 @@ class ParameterJump(Family):
         sub = int(min(max(1, best.model.substeps), 2))
         r = dt / (2 * sub)
         here = int(np.ceil((tj - t[k]) / r))
-        w, y = prob.weights, prob.Y[e0:e1]
+        w, y = dg.w, prob.Y[e0:e1]
 
         def sse_sim(tj_try):
             Y = dg.sim_est(best.model.with_params({tj_name: float(tj_try)}), best.x0)
