@@ -3,6 +3,8 @@
 
 import math
 
+import pytest
+
 from pipeline.diagnostics.engine import Candidate, choose
 from pipeline.diagnostics.families import Hypothesis
 
@@ -65,3 +67,111 @@ def test_a_hidden_cubic_spring_is_not_given_to_the_library(tmp_path):
     assert lib["delta_bic"] < first["delta_bic"]
     assert lib["delta_bic"] + lib["prior_penalty"] > first["delta_bic"] + first["prior_penalty"]
     assert "model prior" in lib["separation"]
+
+
+# ------------------------------------------------------------------ ΔBIC with the effective sample size
+def _ar1(phi: float, n: int, seed: int):
+    """AR(1) noise by scipy's filter (not the project's code), unit innovation variance."""
+    import numpy as np
+    from scipy.signal import lfilter
+    return lfilter([1.0], [1.0, -phi], np.random.default_rng(seed).standard_normal(n))
+
+
+def _refit(resid, n_params: int):
+    import numpy as np
+    from types import SimpleNamespace
+    r = np.asarray(resid, float).reshape(-1, 1)
+    return SimpleNamespace(resid_est=r, sse_w=float(r[:, 0] @ r[:, 0]), n_params=n_params)
+
+
+def test_effective_bic_is_jones_formula_with_the_best_refits_lag1_autocorrelation():
+    """ΔBIC_eff = (N_eff/N)·(ΔBIC − Δk ln N) + Δk ln N_eff, N_eff = N(1 − ρ)/(1 + ρ) with ρ the lag-1
+    autocorrelation (statsmodels' acf here) of the residual of the refit that fits best (Jones 2011)."""
+    from statsmodels.tsa.stattools import acf
+    from pipeline.diagnostics.engine import effective_bic
+    n = 2000
+    e_best, e_other = _ar1(0.9, n, 1), 1.5 * _ar1(0.9, n, 2)
+    current = _refit(3 * _ar1(0.9, n, 3), 2)
+    a = _acc("input_delay", "input_delay", -4071.85, 1)
+    b = _acc("unmodeled_dynamics", "unmodeled_dynamics:u@2.5dt", -4077.73, 1)
+    a.fit, b.fit = _refit(e_best, 3), _refit(e_other, 3)
+    n_eff = effective_bic([a, b], current)
+    rho = acf(e_best, nlags=1, fft=False)[1]
+    assert 0.85 < rho < 0.95
+    assert n_eff == pytest.approx(n * (1 - rho) / (1 + rho), rel=1e-9)
+    for c, raw in ((a, -4071.85), (b, -4077.73)):
+        assert c.delta_bic_eff == pytest.approx((raw - math.log(n)) * n_eff / n + math.log(n_eff), rel=1e-12)
+    # the 5.9 raw BIC units the lag had over the delay are 0.3 effective units: a prior over two places
+    # for the lag now decides, where raw ΔBIC would have named the lag whatever the prior
+    assert abs(a.delta_bic_eff - b.delta_bic_eff) < 0.5
+    b.places = 2
+    assert choose([b, a]) is a
+    a.delta_bic_eff = b.delta_bic_eff = None
+    assert choose([b, a]) is b
+
+
+def test_effective_bic_leaves_white_residuals_nearly_as_they_are():
+    """White residuals: ρ ≈ 0, N_eff ≈ N, and a 2-unit ΔBIC lead survives."""
+    from pipeline.diagnostics.engine import effective_bic
+    import numpy as np
+    n = 2000
+    rng = np.random.default_rng(7)
+    current = _refit(rng.standard_normal(n), 2)
+    a, b = _acc("offset", "offset:v", -433.3, 1), _acc("output_offset", "output_offset:y", -431.2, 1)
+    a.fit, b.fit = _refit(rng.standard_normal(n), 3), _refit(rng.standard_normal(n), 3)
+    n_eff = effective_bic([a, b], current)
+    assert 0.9 * n < n_eff <= 1.1 * n
+    assert choose([b, a]) is a and b.delta_bic_eff - a.delta_bic_eff > 1.5
+    assert effective_bic([], current) is None
+
+
+# ------------------------------------------------------------------ near-equals separated by validation
+def _separate(best, others, y, yhats):
+    """Diagnoser.separate on a one-output problem whose validation part is the whole record."""
+    import numpy as np
+    from types import SimpleNamespace
+    from pipeline.data import Split
+    from pipeline.diagnostics.engine import Diagnoser
+    y = np.asarray(y, float).reshape(-1, 1)
+    prob = SimpleNamespace(Y=y, split=Split((0, 0), (0, len(y))))
+    for c, yh in zip([best] + others, yhats):
+        c.fit = SimpleNamespace(Yhat=np.asarray(yh, float).reshape(-1, 1))
+        c.gain = {"relative": 0.5}
+    me = SimpleNamespace(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION,
+                         SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
+    return Diagnoser.separate(me, best, [best] + others)
+
+
+def test_a_near_equal_clearly_better_on_validation_is_the_finding():
+    """Within 2 criterion units the estimation part cannot separate two causes; the other one replaces
+    the chosen one when its validation error is lower with the 95 % interval above 0 and by ≥ 1 %."""
+    import numpy as np
+    n = 1000
+    t = np.arange(n)
+    e = 0.1 * np.random.default_rng(3).standard_normal(n)
+    misfit = 0.2 * np.sin(2 * np.pi * t / 50)
+    y = np.sin(2 * np.pi * t / 200) + e
+    truth = y - e                                    # the other model leaves only the noise
+    best = _acc("parameter_jump", "parameter_jump:k@18.1", -700.0, 1)
+    other = _acc("parameter_drift", "parameter_drift:k", -698.6, 1)
+    got = _separate(best, [other], y, [truth + misfit, truth])
+    assert got is other and "parameter_jump:k@18.1" in other.separation and "lower" in other.separation
+    # outside the tie the estimation part decides, however much better the other is on validation
+    best2, far = _acc("parameter_jump", "j", -700.0, 1), _acc("parameter_drift", "d", -697.9, 1)
+    assert _separate(best2, [far], y, [truth + misfit, truth]) is best2
+
+
+def test_a_near_equal_better_by_less_than_one_percent_does_not_replace_the_finding():
+    """A deterministic difference of 0.3 % of the validation RMSE is significant on a low-noise record
+    (its interval is above 0), and is no evidence of the cause: the estimation choice stands."""
+    import numpy as np
+    n = 1000
+    e = 0.1 * np.random.default_rng(4).standard_normal(n)
+    y = e.copy()
+    small = 0.003 * e                              # the other's residual is 0.997 e: 0.3 % lower
+    best = _acc("unmodeled_dynamics", "unmodeled_dynamics:u@2.5dt", -90.0, 1)
+    other = _acc("input_delay", "input_delay", -89.0, 1)
+    from pipeline.diagnostics.gain import gain_ci
+    g = gain_ci(y.reshape(-1, 1), (y - small).reshape(-1, 1))
+    assert g["ci95"][0] > 0 and g["relative"] < 0.01      # significant and immaterial
+    assert _separate(best, [other], y, [np.zeros(n), small]) is best and not other.separation
