@@ -157,6 +157,9 @@ class ModelCfg(_Strict):
     input_delay: Annotated[Finite, Field(ge=0)] | None = None
     # the inputs model.input_delay acts on (default: every input); e.g. one actuator of two with a dead time
     delayed_inputs: list[StrictStr] | None = None
+    # bounds of free parameters, [lower, upper] with null for no bound on that side (a loss coefficient
+    # that cannot be negative: {a: [0, null]}); respected by every output-error fit and refit
+    bounds: dict[str, tuple[Finite | None, Finite | None]] = Field(default_factory=dict)
 
 
 class SplitCfg(_Strict):
@@ -336,6 +339,8 @@ class LoadedConfig:
         for key, default in (("uncertainty", "gauss"), ("units", {})):  # report-only keys at their
             if d.get(key) == default:                                   # defaults keep run ids stable
                 d.pop(key)
+        if not d["model"].get("bounds"):       # a key added later: absent, a config's run id is unchanged
+            d["model"].pop("bounds", None)
         return d
 
     def sha256(self) -> str:
@@ -535,6 +540,18 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     for p in m.free:
         if p not in m.params:
             raise ConfigError(f"free parameter {p!r} is not in model.params", file=f, key="model.free")
+    for p, (lo, hi) in m.bounds.items():
+        key = f"model.bounds.{p}"
+        if p not in m.free:
+            raise ConfigError(f"{p!r} is not a free parameter (model.free: {', '.join(m.free) or 'none'}): only a "
+                              "fitted parameter can be bounded", file=f, key=key)
+        if lo is not None and hi is not None and not lo < hi:
+            raise ConfigError(f"the lower bound {lo:g} is not below the upper bound {hi:g}", file=f, key=key)
+        v = m.params[p]
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise ConfigError(f"the starting value {p} = {v:g} (model.params) is outside its bounds "
+                              f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]",
+                              file=f, key=key)
     allowed = set(m.states) | set(m.inputs) | set(m.params) | {"t"}
     eqs = {s: parse(m.equations[s], allowed, where=f"model.equations.{s}", file=f) for s in m.states}
     outs = {o: parse(e, allowed, where=f"model.outputs.{o}", file=f) for o, e in m.outputs.items()}

@@ -224,7 +224,8 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
                                   bound=prob.bound)
             if res.diverged_at is not None:
                 raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
-                                      f"(parameters {model.params})")
+                                      f"(parameters {model.params}); a parameter's physical range can be "
+                                      "given in model.bounds (e.g. {a: [0, null]})")
     return Yh
 
 
@@ -346,6 +347,26 @@ def _declared_output_check(model: Model, t: np.ndarray, U: np.ndarray, X: np.nda
                                   "of a negative number?)", key=f"model.outputs.{name}")
 
 
+def param_bounds(model: Model, n_x0: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of ``model.free`` (config ``model.bounds``; ±inf where none), then of
+    ``n_x0`` estimated initial states (unbounded)."""
+    lo = [model.bounds.get(k, (-math.inf, math.inf))[0] for k in model.free] + [-math.inf] * n_x0
+    hi = [model.bounds.get(k, (-math.inf, math.inf))[1] for k in model.free] + [math.inf] * n_x0
+    return np.array(lo, float), np.array(hi, float)
+
+
+def at_bounds(fit: "FitResult") -> list[str]:
+    """The free parameters a fit ended on one of their bounds (within 1e-9 relative): their standard
+    errors are those of an interior optimum and do not describe a constrained estimate."""
+    lb, ub = param_bounds(fit.model)
+    out = []
+    for k, v, lo, hi in zip(fit.model.free, fit.theta, lb, ub):
+        tol = 1e-9 * max(1.0, abs(v))
+        if (np.isfinite(lo) and v - lo <= tol) or (np.isfinite(hi) and hi - v <= tol):
+            out.append(k)
+    return out
+
+
 def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | None = None,
                      max_nfev: int = 200, loss="linear", f_scale: float = 1.0,
                      sample_weights: np.ndarray | None = None, abandon_above: float | None = None,
@@ -380,6 +401,10 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     th0 = np.array([(start or {}).get(k, model.params[k]) for k in model.free]
                    + [x0_base[model.states.index(n[3:])] for n in x0_names], dtype=float)
     nfree = len(model.free)
+    lb, ub = param_bounds(model, len(x0_names))
+    bounded = bool(np.any(np.isfinite(lb)) or np.any(np.isfinite(ub)))
+    if bounded:      # a start outside the bounds (an equation-error estimate, a test's linearised value)
+        th0 = np.clip(th0, lb, ub)
     penalty = np.full(yobs.size, 1e3)
 
     def unpack(th):
@@ -445,6 +470,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         steps = (stop - prob.fit_segment()[0]) * model.substeps
         par = ({"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1
                and steps >= JACOBIAN_THREADS_MIN_STEPS else {})
+        if bounded:
+            par["bounds"] = (lb, ub)
         sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
                             f_scale=f_scale, ftol=ftol, **par)
         th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)

@@ -20,6 +20,7 @@ never recompiles. The input delay acts on the sampled input before the kernel.
 from __future__ import annotations
 
 import ast
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -108,6 +109,8 @@ class Model:
     # additive state terms compiled into the simulation kernel instead of interpreted (a speed choice
     # with no effect on the equations: see :meth:`compiled` and :mod:`pipeline.simulate`)
     kernel_terms: tuple[Term, ...] = ()
+    # (lower, upper) of free parameters (config model.bounds; ±inf for no bound): respected by the fits
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self):
         if not self.nominal_states:
@@ -135,7 +138,9 @@ class Model:
         model = cls(states=tuple(m.states), inputs=tuple(m.inputs), equations=dict(lc.equations),
                     output_exprs=dict(lc.output_exprs), params={k: float(v) for k, v in m.params.items()},
                     free=tuple(m.free), initial=initial, substeps=m.substeps,
-                    intersample=lc.cfg.data.intersample, nominal_params=tuple(m.params))
+                    intersample=lc.cfg.data.intersample, nominal_params=tuple(m.params),
+                    bounds={k: (-math.inf if lo is None else float(lo), math.inf if hi is None else float(hi))
+                            for k, (lo, hi) in m.bounds.items()})
         if m.input_delay is not None:  # a known dead time (config key model.input_delay): fixed
             name = fresh_name(model, "input_delay_s")
             model = replace(model, params={**model.params, name: float(m.input_delay)}, delay=name,

@@ -33,7 +33,7 @@ from .errors import ConfigError, InputError, SimulationError, in_file
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
-from .fit import FitResult, Problem, equation_error_start
+from .fit import FitResult, Problem, at_bounds, equation_error_start
 from .extended import extended_config
 from .model import Model
 from .runfolder import check_target, finalize, kill_point, make_temp, publish
@@ -68,7 +68,8 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
                                               for i, name in enumerate(prob.out_names)}}
                               if r.shape[1] > 1 else {})},
             "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
-            "identifiability": fit.identifiability.record() if fit.identifiability else None}
+            "identifiability": fit.identifiability.record() if fit.identifiability else None,
+            **({"at_bound": at_bounds(fit)} if fit.model.bounds else {})}
 
 
 def families_of(lc: LoadedConfig) -> list[str]:

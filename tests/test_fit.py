@@ -126,3 +126,58 @@ def test_a_refit_starts_from_the_current_fits_estimated_initial_state():
     assert again.sse_w <= fit.sse_w * (1 + 1e-9)
     with pytest.raises(RefitAbandoned):
         fit_output_error(fit.model, prob, abandon_above=fit.sse_w * (1 + 1e-9), abandon_after=1)
+
+
+# ------------------------------------------------------------------ model.bounds
+def _first_order_case(tmp_path, bounds=None, a=0.5, b=2.0, n=600, dt=0.1, noise=0.02, seed=0):
+    """x' = −a x + b u, zoh input, exact discretisation x_{k+1} = e^{−aΔ} x_k + (b/a)(1 − e^{−aΔ}) u_k
+    (closed form, not the project's integrator), Gaussian noise; the config's model and Problem."""
+    import pandas as pd
+    import yaml
+    from pipeline.config import load_config
+    from pipeline.model import Model
+    from pipeline.runs import load_record, make_split
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.uniform(-1, 1, n // 20), 20)
+    x = np.zeros(n)
+    f = np.exp(-a * dt)
+    for k in range(n - 1):
+        x[k + 1] = f * x[k] + b / a * (1 - f) * u[k]
+    pd.DataFrame({"t": np.arange(n) * dt, "u": u, "y": x + noise * rng.standard_normal(n)}).to_csv(
+        tmp_path / "rec.csv", index=False)
+    cfg = {"name": "fo", "seed": 0, "data": {"path": "rec.csv", "time": "t", "inputs": ["u"], "outputs": ["y"]},
+           "model": {"states": ["y"], "inputs": ["u"], "params": {"a": 0.2, "b": 1.0}, "free": ["a", "b"],
+                     "equations": {"y": "-a*y + b*u"}, "initial": 0.0}}
+    if bounds:
+        cfg["model"]["bounds"] = bounds
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(tmp_path / "c.yaml")
+    rec = load_record(lc)
+    model = Model.from_config(lc)
+    return model, Problem.from_record(rec, model, make_split(lc, rec), None)
+
+
+def test_inactive_bounds_leave_the_fit_as_it_is(tmp_path):
+    from pipeline.fit import at_bounds
+    free, prob = _first_order_case(tmp_path)
+    bounded, _ = _first_order_case(tmp_path, bounds={"a": [0, 10], "b": [None, 100]})
+    assert bounded.bounds == {"a": (0.0, 10.0), "b": (-np.inf, 100.0)}
+    f0, f1 = fit_output_error(free, prob), fit_output_error(bounded, prob)
+    assert f1.theta == pytest.approx(f0.theta, rel=1e-6) and f1.std == pytest.approx(f0.std, rel=1e-4)
+    assert f0.theta == pytest.approx([0.5, 2.0], rel=0.02)
+    assert at_bounds(f1) == []
+
+
+def test_an_active_bound_holds_and_is_reported(tmp_path):
+    """The loss coefficient is 0.5; bounded to at most 0.3 the fit sits on the bound, b takes the
+    constrained optimum, and the error is above the unconstrained fit's."""
+    from pipeline.fit import at_bounds
+    free, prob = _first_order_case(tmp_path)
+    bounded, _ = _first_order_case(tmp_path, bounds={"a": [0, 0.3]})
+    f0, f1 = fit_output_error(free, prob), fit_output_error(bounded, prob)
+    a1 = dict(zip(f1.names, f1.theta))["a"]
+    assert a1 == pytest.approx(0.3, abs=1e-9) and a1 <= 0.3
+    assert at_bounds(f1) == ["a"] and f1.sse_w > 1.5 * f0.sse_w
+    # a start outside the bounds (an equation-error estimate, a refit's linearised value) is moved in
+    f2 = fit_output_error(bounded, prob, start={"a": 2.0, "b": 5.0})
+    assert dict(zip(f2.names, f2.theta))["a"] == pytest.approx(0.3, abs=1e-9)

@@ -109,3 +109,31 @@ def test_parquet_and_mat_loaders_match_csv(tmp_path):
 def test_cli_usage_error_is_exit_2(capsys):
     assert main(["report"]) == 2
     assert main(["frobnicate", "x.yaml"]) == 2
+
+
+def test_bounds_keep_a_fit_physical_where_the_unbounded_one_fails_on_validation(tmp_path, capsys):
+    """An independent-bench record (solve_ivp; test seed 1002): a tank h' = b·u − a·√h whose outflow
+    coefficient jumps 0.5 → 0.9 at 84 s. The nominal least-squares optimum is a = −0.0002, b = −0.022;
+    simulated on the validation part it takes √ of a negative level, and the run stops (exit 2, the
+    model named). With ``model.bounds`` a ≥ 0, b ≥ 0 the run completes; the bound that holds is named."""
+    from pipeline.bench.independent.case import make_case
+    case = make_case("parameter_jump", "tank", 1002, magnitude="large", noise=0.02, colour="ar0.5",
+                     input_kind="band", n=2000, out_dir=tmp_path)
+    cfg_path = Path(case.dir) / "config.yaml"
+    assert main(["diagnose", str(cfg_path), "--out", str(tmp_path / "free")]) == 2
+    err = capsys.readouterr().err
+    assert "the fitted model fails on this record" in err and "model.bounds" in err
+    assert not (tmp_path / "free").exists()
+    cfg = yaml.safe_load(cfg_path.read_text())
+    cfg["model"]["bounds"] = {"a": [0, None], "b": [0, None]}
+    (Path(case.dir) / "bounded.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["report", str(Path(case.dir) / "bounded.yaml"), "--out", str(tmp_path / "bounded")]) == 0
+    s = json.loads((tmp_path / "bounded" / "summary.json").read_text())
+    p = s["nominal"]["params"]
+    assert p["a"] >= 0 and p["b"] >= 0 and s["nominal"]["at_bound"]
+    page = (tmp_path / "bounded" / "report.html").read_text(encoding="utf-8")
+    assert "On a bound of <code>model.bounds</code>: " + ", ".join(s["nominal"]["at_bound"]) in page
+    assert s["diagnosis"]["verdict"] != "no_significant_discrepancy"
+    # the model written back keeps the bounds, so a rerun of it fits the same way
+    ext = yaml.safe_load((tmp_path / "bounded" / "extended.yaml").read_text())
+    assert ext["model"]["bounds"] == {"a": [0, None], "b": [0, None]}

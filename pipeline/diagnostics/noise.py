@@ -59,7 +59,7 @@ from scipy import optimize, signal
 from scipy import stats as sps
 
 from ..errors import EstimationError, InputError
-from ..fit import FitResult, Problem, fit_output_error, simulate_full, simulate_until
+from ..fit import FitResult, Problem, fit_output_error, param_bounds, simulate_full, simulate_until
 from .adequacy import material
 from .gain import CI_MEANING, mean_interval
 from .hausman import oe_pem_hausman
@@ -355,8 +355,14 @@ def _colored(S: _Sim, ctx: _Ctx) -> _Fix:
             blocks.append(B)
         return np.vstack(blocks)
 
-    x = optimize.least_squares(fun, np.r_[S.fit.theta, np.concatenate(A0)], jac=jac, x_scale="jac",
-                               max_nfev=50).x
+    x0 = np.r_[S.fit.theta, np.concatenate(A0)]
+    lb, ub = param_bounds(S.fit.model, k - len(S.fit.model.free))
+    kw = {}
+    if np.any(np.isfinite(lb)) or np.any(np.isfinite(ub)):   # the config's model.bounds (AR terms free)
+        na = len(x0) - k
+        kw["bounds"] = (np.r_[lb, np.full(na, -np.inf)], np.r_[ub, np.full(na, np.inf)])
+        x0[:k] = np.clip(x0[:k], lb, ub)
+    x = optimize.least_squares(fun, x0, jac=jac, x_scale="jac", max_nfev=50, **kw).x
     th = x[:k]
     A = [x[off[j]:off[j + 1]] for j in range(ny)]
     R = S.resid(th)

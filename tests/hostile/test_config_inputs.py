@@ -123,6 +123,16 @@ CASES = [
     ("verdict-as-family", [("diagnose.families", ["none"])], ["diagnose.families", "unknown family"]),
     ("unknown-family", [("diagnose.families", ["gremlins"])], ["diagnose.families", "unknown family"]),
     ("rules-zero", [("structures", {**STRUCT, "takagi_sugeno": {"rules": [0]}})], ["structures.takagi_sugeno.rules"]),
+    # parameter bounds
+    ("bound-not-free", [("model.bounds", {"m": [0, None]})], ["model.bounds.m", "not a free parameter"]),
+    ("bound-unknown", [("model.bounds", {"zeta": [0, 1]})], ["model.bounds.zeta", "not a free parameter"]),
+    ("bound-reversed", [("model.bounds", {"c": [2, 1]})], ["model.bounds.c", "not below"]),
+    ("bound-equal", [("model.bounds", {"c": [1, 1]})], ["model.bounds.c", "not below"]),
+    ("bound-start-outside", [("model.bounds", {"k": [5, None]})], ["model.bounds.k", "k = 4", "outside"]),
+    ("bound-text", [("model.bounds", {"c": ["zero", 1]})], ["model.bounds.c"]),
+    ("bound-one-number", [("model.bounds", {"c": 0})], ["model.bounds.c"]),
+    ("bound-three-numbers", [("model.bounds", {"c": [0, 1, 2]})], ["model.bounds.c"]),
+    ("bound-inf", [("model.bounds", {"c": [0, ".inf"]})], ["model.bounds.c"]),
 ]
 
 
