@@ -88,9 +88,12 @@ class Candidate:
         return d + self.prior_penalty
 
 
-def effective_bic(accepted: list[Candidate], current: FitResult) -> float | None:
-    """Sets each accepted candidate's ``delta_bic_eff``, its ΔBIC against ``current`` with the residual's
-    effective sample size, and returns that N_eff (None when nothing is accepted).
+def effective_bic(weighed: list[Candidate], current: FitResult) -> float | None:
+    """Sets each weighed candidate's ``delta_bic_eff`` (a refit with its ΔBIC), its ΔBIC against
+    ``current`` with the residual's effective sample size, and returns that N_eff (None when there is
+    none). N_eff is taken from the accepted candidates when there are any (the choice is among them),
+    else from all of them; rejected ones get the same N_eff, so that a runner-up that was not accepted
+    is listed on the finding's scale (:meth:`Diagnoser.finding`).
 
     ΔBIC = N ln(det Σ̂₁/det Σ̂₀) + Δk ln N counts every residual as an independent sample. An output-error
     residual with lag-1 autocorrelation ρ carries the information of N_eff = N(1 − ρ)/(1 + ρ) independent
@@ -107,13 +110,14 @@ def effective_bic(accepted: list[Candidate], current: FitResult) -> float | None
     library term tanh(w/0.535) fitted the estimation part 14.4 BIC units better than w·|w| and was named
     over a 4-place prior; with the effective size the lead is 0.9 units and the prior (2 ln 4 = 2.8)
     names the quadratic damping, whose validation gain is the same (28.7 % vs 28.6 %)."""
-    if not accepted:
+    weighed = [c for c in weighed if c.fit is not None and c.delta_bic is not None]
+    if not weighed:
         return None
     n = current.resid_est.shape[0]
-    best = min(accepted, key=lambda c: c.fit.sse_w)
+    best = min([c for c in weighed if c.accepted] or weighed, key=lambda c: c.fit.sse_w)
     r = float(min(max(stats.lag1(best.fit.resid_est), 0.0), 0.999))
     n_eff = max(n * (1.0 - r) / (1.0 + r), 2.0)
-    for c in accepted:
+    for c in weighed:
         dk = c.fit.n_params + len(c.hyp.searched) - current.n_params
         like = c.delta_bic - dk * math.log(n)
         c.delta_bic_eff = like * n_eff / n + dk * math.log(n_eff)
@@ -1153,7 +1157,7 @@ class Diagnoser:
                         if c.fit is None:
                             c.fit = self.estimate(current, c)
                         self._weigh(c, current, before, bic0, rng)
-            effective_bic([c for c in cands if c.accepted], current)
+            effective_bic(cands, current)
             rec = {"iteration": it + 1, "candidates": [_cand_record(c) for c in cands]
                    + (hist["candidates"] if not switched else []),
                    "skipped": [{"family": f, "reason": r} for f, r in dict.fromkeys(skipped)]}
@@ -1173,7 +1177,8 @@ class Diagnoser:
                 continue
             if best is None:
                 break
-            findings.append(self.finding(best, [c for c in acc if c is not best]))
+            findings.append(self.finding(best, [c for c in cands if c is not best and c.gain is not None
+                                                and c.delta_bic_eff is not None]))
             steps.append(Accepted(best.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
                                   best.lr.p_value, best.lr.statistic, current.sse_w, best.fit.sse_w))
             current = self._accepted(best.fit)
@@ -1314,7 +1319,9 @@ class Diagnoser:
         _log(f"  {c.hyp.key} {c.separation}")
         return c
 
-    RUNNER_UP_DBIC = 10.0   # accepted alternatives within this ΔBIC of the finding are listed with it
+    # refitted alternatives within this criterion of the finding's are listed with it, accepted or not (an
+    # offset in the force equation whose gain interval reached below 0 beside an accepted sensor offset)
+    RUNNER_UP_DBIC = 10.0
 
     def finding(self, c: Candidate, others: list[Candidate] | None = None) -> dict:
         h, fit = c.hyp, c.fit
@@ -1338,9 +1345,11 @@ class Diagnoser:
                 prior = ("" if o.places == c.places else
                          f"; with the model prior's 2 ln(places) ({o.places} vs {c.places} places) "
                          f"{abs(dc):.1f} {'higher' if dc >= 0 else 'lower'}")
-                runners.append({"family": o.hyp.family, "hypothesis": o.hyp.key, "delta_bic": o.delta_bic,
+                status = "" if o.accepted else f"not accepted ({o.reason}); "
+                runners.append({"family": o.hyp.family, "hypothesis": o.hyp.key, "accepted": o.accepted,
+                                "delta_bic": o.delta_bic,
                                 "delta_bic_eff": o.delta_bic_eff, "prior_penalty": o.prior_penalty,
-                                "gain": o.gain, "separation": f"BIC {abs(d_raw):.1f} "
+                                "gain": o.gain, "separation": f"{status}BIC {abs(d_raw):.1f} "
                                 f"{'higher' if d_raw >= 0 else 'lower'} than the finding's{eff}{prior}; "
                                 f"validation gain {100 * o.gain['relative']:.1f} % vs {100 * g['relative']:.1f} %"})
         if c.separation:
