@@ -115,8 +115,7 @@ def effective_bic(weighed: list[Candidate], current: FitResult) -> float | None:
         return None
     n = current.resid_est.shape[0]
     best = min([c for c in weighed if c.accepted] or weighed, key=lambda c: c.fit.sse_w)
-    r = float(min(max(stats.lag1(best.fit.resid_est), 0.0), 0.999))
-    n_eff = max(n * (1.0 - r) / (1.0 + r), 2.0)
+    n_eff = max(stats.effective_n(n, stats.lag1(best.fit.resid_est))[1], 2.0)
     for c in weighed:
         dk = c.fit.n_params + len(c.hyp.searched) - current.n_params
         like = c.delta_bic - dk * math.log(n)
@@ -507,10 +506,7 @@ class Diagnoser:
                 tried.add(key)
                 if m.extra_states:
                     m = replace(m, initial=dict(m.initial))
-                m = self._compiled_if_long(m)
-                # abandoned if still above the current model's error after about four iterations
-                f = fit_output_error(m, self.prob, start=estimated_x0(fit), abandon_above=fit.sse_w * (1 + 1e-9),
-                                     abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
+                f = self.budgeted_fit(fit, m)
             except (InputError, np.linalg.LinAlgError, ArithmeticError) as exc:
                 why.append(f"from {scale:g} x the test's estimate: {exc}")
                 continue
@@ -524,6 +520,14 @@ class Diagnoser:
         if best is None:
             cand.reason = "refit failed " + "; ".join(why)[:600]
         return best
+
+    def budgeted_fit(self, fit: FitResult, m: Model) -> FitResult:
+        """An extension ``m`` of ``fit`` refitted from ``fit``'s initial state, abandoned
+        (:class:`RefitAbandoned`, an :class:`InputError`) if still above ``fit``'s error after about
+        ``REFIT_BUDGET_ITERATIONS`` iterations; compiled on a long record (:meth:`_compiled_if_long`)."""
+        m = self._compiled_if_long(m)
+        return fit_output_error(m, self.prob, start=estimated_x0(fit), abandon_above=fit.sse_w * (1 + 1e-9),
+                                abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
 
     def estimate(self, fit: FitResult, cand: Candidate) -> FitResult | None:
         fam = REGISTRY[cand.hyp.family]

@@ -454,6 +454,15 @@ def _ar_filter(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     return out
 
 
+def effective_n(n: int, rho: float) -> tuple[float, float]:
+    """(ρ clipped to [0, 0.999], N_eff = N(1 − ρ)/(1 + ρ)): the number of independent samples a sum of
+    squares of an AR(1) residual with lag-1 autocorrelation ρ carries (Bartlett 1946; Bayley &
+    Hammersley 1946). A negatively correlated residual is not given more than N samples; a non-finite ρ
+    counts as 0."""
+    r = float(min(max(rho, 0.0), 0.999)) if math.isfinite(rho) else 0.0
+    return r, n * (1.0 - r) / (1.0 + r)
+
+
 def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float = 0.01,
             break_trim: float | None = None) -> TestResult:
     """Likelihood-ratio test of a refit with q more parameters against the current model, with the
@@ -473,8 +482,7 @@ def lr_test(rss0: float, rss1: float, n: int, q: int, rho: float, alpha: float =
 
     ``break_trim``: the refit adds one coefficient's jump at a date searched over [trim, 1 − trim] of
     the sample; the p-value is then :func:`sup_lr_break_p`'s (``q`` is not used)."""
-    r = float(min(max(rho, 0.0), 0.999)) if math.isfinite(rho) else 0.0
-    n_eff = n * (1.0 - r) / (1.0 + r)
+    r, n_eff = effective_n(n, rho)
     if rss1 <= 0 or rss0 <= 0:
         stat = 0.0 if rss0 <= rss1 else float("inf")
     else:

@@ -21,7 +21,6 @@ doubled (Bonferroni over the two):
 import numpy as np
 
 from ...errors import InputError
-from ...fit import estimated_x0, fit_output_error
 from ...model import Term
 from ..stats import column_basis
 from .base import Context, Family, Hypothesis, pname
@@ -115,7 +114,6 @@ class PeriodicDisturbance(Family):
         with a validation gain of 26 % instead of 98 % (an independent-bench record, 2 % noise), and the
         cause was rejected. Not on a long record (``ctx.long_record``'s rule), where the bins are fine
         and each simulation costs milliseconds."""
-        from ..engine import REFIT_BUDGET_ITERATIONS      # the engine imports the families
         plain = dg.refit(fit, cand)
         if dg._long(fit.model):
             return plain
@@ -154,16 +152,16 @@ class PeriodicDisturbance(Family):
             prof.append((float(np.sum((r - S @ beta) ** 2)), float(f), beta))
         # the profile's local minima, lowest first: the linearisation at a fit bent towards the sinusoid
         # ranks them only roughly (true 0.3375 Hz: 0.340 Hz second to 0.385 Hz), so each is refitted
-        minima = sorted(p for i, p in enumerate(prof)
-                        if (i == 0 or p[0] < prof[i - 1][0]) and (i == len(prof) - 1 or p[0] < prof[i + 1][0]))
+        minima = sorted((p for i, p in enumerate(prof)
+                         if (i == 0 or p[0] < prof[i - 1][0]) and (i == len(prof) - 1 or p[0] < prof[i + 1][0])),
+                        key=lambda p: p[0])
         best = plain
         for _, f, beta in minima[:SCAN_REFITS]:
             # amplitudes from 0, as the plain refit's last start: from the profile's linearised amplitudes
             # the 0.340 Hz start above ended at 0.280 Hz; from 0 it reaches 0.3375 Hz
             m = self.extend(fit.model, hyp, {hyp.coefs[0]: 0.0, hyp.coefs[1]: 0.0, fname: f})
             try:   # with the plain refit's budget: abandoned while above the current model's error
-                g = fit_output_error(m, prob, start=estimated_x0(fit), abandon_above=fit.sse_w * (1 + 1e-9),
-                                     abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
+                g = dg.budgeted_fit(fit, m)
             except (InputError, np.linalg.LinAlgError, ArithmeticError):
                 continue        # the plain refit stands; its own failures are reported
             if best is None or g.sse_w < best.sse_w:
