@@ -44,7 +44,8 @@ from . import stats
 from ..errors import InputError, SimulationError
 from .families import NOISE_FAMILY_IDS, REGISTRY, Context, Hypothesis, Structure
 from .families.base import Family
-from .families.periodic_disturbance import family_p_value as periodic_p_value, line_test_p as periodic_line_p
+from .families.periodic_disturbance import (family_p_value as periodic_p_value, line_test_p as periodic_line_p,
+                                            n_lines as periodic_n_lines)
 from .cusum import cusum_squares_test, cusum_test
 from .adequacy import MATERIAL_R2, adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
 from .form import Accepted, form_test
@@ -458,7 +459,8 @@ class Diagnoser:
     def screened_out(self, fit: FitResult, hyps: list[Hypothesis], sens: list) -> set[int]:
         """Hypotheses that share ``info['screen_group']`` (a jump's grid of times for one parameter) get
         the full added-term test only for the one whose sensitivities explain the largest share of the
-        residual by ordinary least squares beyond the current parameters' (R² of e on S⊥, S⊥ = (I − J J⁺) S);
+        residual by ordinary least squares beyond the current parameters' (R² of e on S⊥, S⊥ = (I − J J⁺) S),
+        or the ``info['screen_keep']`` largest (a periodic disturbance's scanned frequencies);
         the others are not tested (ids returned). The family's p-value stays Bonferroni over *all* its
         hypotheses: the tested one's p is at least the smallest p of the group, so min p × m still
         bounds the family's size by α (Bonferroni 1936), and the share explained is what picks the
@@ -484,8 +486,9 @@ class Diagnoser:
                 Sp = S - Q @ (Q.T @ S) if Q is not None else S
                 b = np.linalg.lstsq(Sp, e, rcond=None)[0]
                 share.append(float(np.sum((Sp @ b) ** 2)) / ee)
-            k = int(np.argmax(share))
-            out |= {id(h) for i, (h, _) in enumerate(items) if i != k}
+            n_keep = max(1, int(items[0][0].info.get("screen_keep", 1)))
+            keep = set(np.argsort(-np.asarray(share), kind="stable")[:n_keep])
+            out |= {id(h) for i, (h, _) in enumerate(items) if i not in keep}
         return out
 
     # -- refits ------------------------------------------------------------------------------------
@@ -544,7 +547,8 @@ class Diagnoser:
         prob = self.prob
         return Context(fit.model, Structure.of(fit.model), prob.t, prob.U, prob.Y, prob.out_names,
                        states_full(fit.model, prob, fit.x0), prob.split.est, self.dt, f_hz, self.couplings,
-                       long_record=self._long(fit.model), first_round=first_round)
+                       long_record=self._long(fit.model), first_round=first_round,
+                       resid=fit.resid_est * self.w)
 
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult,
                    first_round: bool = False) -> tuple[list[Candidate], list]:
@@ -601,15 +605,22 @@ class Diagnoser:
             best = self._lr_screen(fit, fam, hyps, results, best, lr_done)
             if fam == "periodic_disturbance":
                 n_est = self.prob.split.est[1] - self.prob.split.est[0]
+                n_freq = periodic_n_lines(n_est, any("scan_hz" in x.info for x in hyps))
+                # Bonferroni over the equations here: the frequencies searched are counted by the line
+                # test's factor n_freq (families.periodic_disturbance)
+                best.p_family = min(1.0, p_min * len({x.equation for x in hyps}))
                 best.evidence.append({"test": "fisher_g", "statistic": fisher.statistic,
                                       "p_value": fisher.p_value})
                 # the line test beside Fisher's g (families.periodic_disturbance): the family's p is the
                 # smaller of the two, doubled; both rows are shown so the evidence says which decided
-                best.evidence.append({"test": "periodic_line_test", "statistic": wr.statistic,
-                                      "p_value": periodic_line_p(best.p_family, n_est),
-                                      "detail": f"added-term Wald p at the periodogram peak x {max(1, n_est // 2)} "
-                                                "Fourier frequencies searched (Bonferroni)"})
-                best.p_family = periodic_p_value(best.p_family, fisher.p_value, n_est)
+                h_min, w_min = min(tested, key=lambda x: x[1].p_value)
+                f_min = float(next(iter(h_min.extra_params.values())))
+                best.evidence.append({"test": "periodic_line_test", "statistic": w_min.statistic,
+                                      "p_value": periodic_line_p(best.p_family, n_freq),
+                                      "detail": f"smallest added-term Wald p of {len(tested)} proposed frequencies "
+                                                f"(at {f_min:.5g} Hz, equation {h_min.equation}) x {n_freq} "
+                                                "frequencies searched (Bonferroni)"})
+                best.p_family = periodic_p_value(best.p_family, fisher.p_value, n_freq)
             if fam == "input_delay":
                 best.evidence.append(self._xcorr_lag(fit, best.hyp.input))
             ee = self._equation_error_evidence(fit, best.hyp)

@@ -2,8 +2,9 @@
 
 Fisher's g is computed on the residual prewhitened by an AR model whose order AIC picks; an AR of
 order ~20 models a spectral line too, so a strong sinusoid can leave no peak behind (here p = 0.89).
-The family's p-value is therefore also the added-term Wald test at the residual's periodogram peak,
-Bonferroni over the n/2 Fourier frequencies that peak could have been chosen from, and the smaller of
+The family's p-value is therefore also the added-term Wald test at the residual's periodogram peak
+(and at the raw periodogram's strongest bins and half bins), Bonferroni over the n − 1 half-bin
+frequencies those could have been chosen from, and the smaller of
 the two p-values doubled (Bonferroni over the two tests). The record is made by the independent bench
 (solve_ivp on a held input, the disturbance written out by hand): a pendulum with a 0.4875 Hz torque
 of amplitude 0.2146, 2 % AR(0.5) noise. Before the line test the diagnosis ended
@@ -40,10 +41,11 @@ def test_periodic_disturbance_named_when_prewhitened_fisher_misses_the_line(tmp_
     # the line test, not Fisher's g, carried the decision
     assert ev["fisher_g"]["p_value"] > 0.01
     assert ev["added_term_wald"]["p_value"] * 1000 * 2 < 0.01
-    # and the finding's evidence says so: the line test's row, Bonferroni over the n_est/2 Fourier
-    # frequencies of the estimation part (1400 samples of this record: 700)
+    # and the finding's evidence says so: the line test's row, Bonferroni over the n_est − 1 half-bin
+    # frequencies of the estimation part (1400 samples of this record: 1399), the search that the
+    # whitened peak and the raw periodogram's strongest bins with their half bins were picked from
     line = ev["periodic_line_test"]
-    assert "x 700 Fourier frequencies" in line["detail"]
-    assert line["p_value"] == pytest.approx(ev["added_term_wald"]["p_value"] * 700, rel=1e-12)
+    assert "x 1399 frequencies searched" in line["detail"]
+    assert line["p_value"] == pytest.approx(ev["added_term_wald"]["p_value"] * 1399, rel=1e-12)
     assert 2 * line["p_value"] < 0.01
     assert f["gain"]["ci95"][0] > 0.5

@@ -75,6 +75,7 @@ class Context:
     couplings: bool = False
     long_record: bool = False      # simulations cost milliseconds here: no extra refits (engine._long)
     first_round: bool = False      # the diagnosis' first round of tests, on the nominal model
+    resid: np.ndarray | None = None   # (n_est, ny) weighted estimation residual of the current fit
     skipped: list = field(default_factory=list)   # (family, reason): guards that removed hypotheses
 
     def inputs_changing_sign(self, share: float = 0.05) -> list[int]:
