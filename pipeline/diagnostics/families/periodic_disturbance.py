@@ -157,8 +157,8 @@ class PeriodicDisturbance(Family):
         parameters' own sensitivities partialled out as in the added-term test), and at the hypotheses'
         other scanned frequencies (``info['scan_hz']``) outside that window; the full refit then starts
         from the ``SCAN_REFITS`` lowest of the profile's local minima and those frequencies, at least
-        half a bin apart (amplitudes from 0, with the plain refit's budget). The plain refit from the peak (:meth:`engine.Diagnoser.refit`) runs too,
-        and the lowest error is kept.
+        half a bin apart (amplitudes from 0, with the plain refit's budget). The plain refit from the
+        hypothesis' frequency (:meth:`engine.Diagnoser.refit`) runs too, and the lowest error is kept.
 
         Why: the sum of squares is multimodal in f, with lobes one bin wide, and at a = b = 0 it has no
         slope in f. A true 0.3375 Hz between the bins of a 28 s window (0.0357 Hz) was started at
