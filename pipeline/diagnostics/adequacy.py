@@ -21,7 +21,9 @@ Adequacy tests on the estimation residual of every output against every input (e
   mode leaves input dynamics at lags far beyond the first two tests' 25 and 15.
 
 The engine adds ``state_nonlinearity`` (:mod:`.state_probe`: Gaussian bumps of each state, tested
-with the hypotheses' sensitivity machinery), ``structural_wald`` (the families' added-term tests on
+with the hypotheses' sensitivity machinery), ``state_nonlinearity_refit`` (those bumps refitted and
+judged on the validation part, before the noise families may explain a coloured residual:
+``engine.Diagnoser.probe_refit``), ``structural_wald`` (the families' added-term tests on
 the final model) and, when the loop needed two static forms of one state in one equation,
 ``nonlinearity_form`` (:mod:`.form`) to these rows. A model that fails them has a structural error; when no family's extension removes it the verdict is
 ``unexplained_discrepancy`` (contract §3), never "no discrepancy", and the noise families are not tested

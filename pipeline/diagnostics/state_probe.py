@@ -21,6 +21,13 @@ Measured on the independent bench's tuning seeds (final models): 1 of 126 null a
 records significant at 0.01 (share 0.9 %, not material), none of 84 heavy-tailed or heteroscedastic
 noise records; the x·exp(−x²) records that ended ``colored_noise`` explain 2.4 % and 22 % of the
 residual here (p = 0.002 and 1e-5).
+
+On a very smooth residual (lag-1 autocorrelation ~0.99) the linearised test has few effective degrees
+of freedom: x·exp(−x²) springs on fresh seeds left it at p = 0.04–0.6 and ended ``colored_noise`` on
+white noise. So before the noise families may explain a coloured residual, the most significant
+probe is refitted by output error and judged on the validation part (``state_nonlinearity_refit``,
+``engine.Diagnoser.probe_refit``): it fails when the 95 % interval of its validation gain lies above 0
+and the validation mean square falls by at least ``MATERIAL_R2``.
 """
 
 from __future__ import annotations
@@ -35,7 +42,8 @@ NAME = "state_nonlinearity"
 
 def probe_hypotheses(ctx: Context, k: int = K) -> list[Hypothesis]:
     """One hypothesis of ``k`` Gaussian bumps per (dynamic equation, nominal state it uses). The
-    hypotheses borrow ``static_nonlinearity``'s extension (an additive term); they are never refitted."""
+    hypotheses borrow ``static_nonlinearity``'s extension (an additive term); they are refitted only by
+    ``engine.Diagnoser.probe_refit``, never named as a cause."""
     m = ctx.model
     out = []
     for eq in Structure.of(m).dynamic_eqs:

@@ -75,3 +75,38 @@ def test_probe_hypotheses_sit_in_the_dynamic_equations(tmp_path, monkeypatch):
     assert sorted(h.key for h in hyps) == [f"{NAME}:v:v", f"{NAME}:v:x"]
     assert all(len(h.coefs) == K and len(h.terms) == K for h in hyps)
     assert Structure.of(seen["d"].final.model).dynamic_eqs == ["v"]
+
+
+# fresh seeds (outside the bench's sets); before the refitted probe both ended ``colored_noise`` on
+# white noise: the linearised probe had p = 0.056 and 0.21 on residuals with lag-1 autocorrelation ~0.99
+@pytest.mark.parametrize("input_kind,seed", [("prbs", 2201), ("band", 2202)])
+def test_a_smooth_residual_the_refitted_probe_explains_is_not_called_coloured_noise(tmp_path, input_kind, seed):
+    case = make_case("xexp", "msd", seed, magnitude="large", noise=0.02, colour="white", input_kind=input_kind,
+                     n=2000, out_dir=tmp_path)
+    d = _run(case).summary["diagnosis"]
+    assert d["verdict"] == "unexplained_discrepancy"
+    assert "colored_noise" not in [f["family"] for f in d["findings"]]
+    lin = next(t for t in d["adequacy"] if t["name"] == NAME)
+    assert lin["passed"]                      # the linearised probe alone did not see it
+    row = next(t for t in d["adequacy"] if t["name"] == NAME + "_refit")
+    assert not row["passed"] and row["explained_share"] >= MATERIAL_R2
+    assert "equation of v" in row["detail"] and "validation RMSE (free run)" in row["detail"]
+    # the noise families were not run on a structure that misfits
+    nf = {t["name"]: t for t in d["final_tests"] if t["on"].endswith("(noise families)")}
+    assert nf["colored_noise"]["detail"].startswith("not tested")
+
+
+@pytest.mark.parametrize("base,input_kind,noise", [("msd", "band", 0.02), ("dcmotor", "held", 0.02),
+                                                   ("pendulum", "band", 0.1)])
+def test_coloured_noise_on_a_correct_model_is_still_named(tmp_path, monkeypatch, base, input_kind, noise):
+    """AR(0.9) noise on a correct model: the residual's colour is the noise's, and the refitted probe
+    must not take it for a misfit. The cost gate is opened (on these records the linearised probe
+    explains 0.2-0.8 % of the residual, under the gate's 1 %), so the refit runs and is judged."""
+    from pipeline.diagnostics import engine
+    monkeypatch.setattr(engine, "PROBE_REFIT_MIN_SHARE", 0.0)
+    case = make_case("none", base, 2300, magnitude="medium", noise=noise, colour="ar0.9", input_kind=input_kind,
+                     n=2000, out_dir=tmp_path)
+    d = _run(case).summary["diagnosis"]
+    assert [f["family"] for f in d["findings"]] == ["colored_noise"]
+    row = next(t for t in d["adequacy"] if t["name"] == NAME + "_refit")
+    assert row["passed"], row["detail"]
