@@ -842,6 +842,8 @@ class Diagnoser:
         lo, hi = h.info["range"]
         return stats.TestResult(
             PROBE_NAME + "_refit", float(g["relative"]), float(g.get("p_not_lower", 1.0)), None, not fails,
+            ("a static function of " + h.state + " that no family's term holds acts in the equation of "
+             + h.equation + ": " if fails else "") +
             f"{len(h.coefs)} Gaussian bumps of {h.state} (centres {lo:.4g} to {hi:.4g}) in the equation of "
             f"{h.equation}, refitted: validation RMSE (free run) {g['before']:.4g} -> {g['after']:.4g} "
             f"({100 * g['relative']:+.1f} %, 95 % interval {100 * g['ci95'][0]:+.1f} to {100 * g['ci95'][1]:+.1f} %; "
