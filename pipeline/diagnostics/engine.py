@@ -810,10 +810,10 @@ class Diagnoser:
         gain is (:func:`gain_ci`): the row fails when the 95 % interval of the gain lies above 0 and the
         validation mean square falls by at least ``MATERIAL_R2``. The colour is then a misfit of the
         structure that no family names, not the noise's, and the verdict is unexplained. The
-        likelihood-ratio test with the effective sample size is shown, not required: the bumps do not
-        whiten a residual they do not fully explain (lag-1 autocorrelation 0.995, N_eff = 3.7, p = 0.85
-        on a record whose validation error they lowered by 25 %, interval 0.4–71 %), and the held-out
-        gain is the stronger evidence. Only when the linearised probe explains at least
+        likelihood-ratio test with the effective sample size is shown, not required: where the bumps
+        do not fully explain the misfit, their residual stays smooth and N_eff falls to a few samples
+        (lag-1 autocorrelation 0.995, N_eff = 3.7 on one x·exp(−x²) record), and the decision rests on
+        the held-out gain. Only when the linearised probe explains at least
         ``PROBE_REFIT_MIN_SHARE`` of the residual (a cost gate; the decision is the held-out test's).
 
         Why: on a very smooth residual (lag-1 autocorrelation 0.997) the linearised probe has few
