@@ -18,6 +18,7 @@ import contextlib
 import io
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pipeline.bench.independent.case import make_case
@@ -49,3 +50,21 @@ def test_periodic_disturbance_named_when_prewhitened_fisher_misses_the_line(tmp_
     assert line["p_value"] == pytest.approx(ev["added_term_wald"]["p_value"] * 1399, rel=1e-12)
     assert 2 * line["p_value"] < 0.01
     assert f["gain"]["ci95"][0] > 0.5
+
+
+def test_the_input_line_guard_flags_only_a_periodic_input_and_within_one_bin():
+    """Closed form: a sine on bin 37 of a 1000-sample input puts all its power there, so it is a line
+    input; a frequency within ±1 bin of it sits on the line, 3 bins away does not; white noise holds
+    90 % of its power in hundreds of bins and has no lines (a disturbance in its band stays testable)."""
+    from pipeline.diagnostics.families.periodic_disturbance import input_lines, on_input_line
+    n = 1000
+    t = np.arange(n)
+    sine, noise = np.sin(2 * np.pi * 37 * t / n), np.random.default_rng(0).normal(size=n)
+    U = np.column_stack([sine, noise])
+    assert list(input_lines(U)) == [37]
+    assert on_input_line(U, 37 / n) and on_input_line(U, 38 / n) and on_input_line(U, 36.4 / n)
+    assert not on_input_line(U, 40 / n)
+    assert not on_input_line(noise[:, None], 37 / n) and input_lines(noise[:, None]).size == 0
+    # the bins computed once give the same answers as computing them per call
+    lines = input_lines(U)
+    assert all(on_input_line(U, k / n, lines) == on_input_line(U, k / n) for k in range(30, 45))

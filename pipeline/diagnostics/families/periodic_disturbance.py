@@ -60,11 +60,12 @@ def amplitude_phase(a: float, b: float) -> tuple[float, float]:
     return float(np.hypot(a, b)), float(np.arctan2(b, a))
 
 
-def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
-    """Is f (cycles/sample) within ±1 bin of a line of a periodic (line-spectrum) input? A broadband
-    input (noise, a dense multisine) has no lines in this sense: a disturbance in its band is tested
-    by its added-term test like any other cause."""
-    n = U.shape[0]
+def input_lines(U: np.ndarray) -> np.ndarray:
+    """The Fourier bins (of the N rows of U) of the lines of every periodic (line-spectrum) input: at
+    most ``SPARSE_LINES`` bins holding 90 % of its power. A broadband input (noise, a dense multisine)
+    has no lines in this sense: a disturbance in its band is tested by its added-term test like any
+    other cause."""
+    out = []
     for j in range(U.shape[1]):
         u = U[:, j] - U[:, j].mean()
         if not np.any(u):
@@ -72,12 +73,16 @@ def on_input_line(U: np.ndarray, f_cyc: float) -> bool:
         per = np.abs(np.fft.rfft(u)) ** 2
         order = np.argsort(per)[::-1]
         m = int(np.searchsorted(np.cumsum(per[order]) / per.sum(), 0.9)) + 1
-        if m > SPARSE_LINES:
-            continue
-        k = int(round(f_cyc * n))
-        if np.any(np.abs(order[:m] - k) <= 1):
-            return True
-    return False
+        if m <= SPARSE_LINES:
+            out.append(order[:m])
+    return np.concatenate(out) if out else np.zeros(0, int)
+
+
+def on_input_line(U: np.ndarray, f_cyc: float, lines: np.ndarray | None = None) -> bool:
+    """Is f (cycles/sample) within ±1 bin of a line of a periodic input (:func:`input_lines`; ``lines``:
+    those bins, when already computed for U)?"""
+    lines = input_lines(U) if lines is None else lines
+    return bool(np.any(np.abs(lines - int(round(f_cyc * U.shape[0]))) <= 1))
 
 
 def n_lines(n_est: int, scanned: bool) -> int:
@@ -116,7 +121,8 @@ class PeriodicDisturbance(Family):
                                          f"(at least {MIN_CYCLES:g} needed): a slow drift, not a periodic disturbance"))
             return []
         U_est = ctx.U[slice(*ctx.est)]
-        if on_input_line(U_est, f * ctx.dt):
+        lines = input_lines(U_est)        # once, for the peak and every scanned frequency
+        if on_input_line(U_est, f * ctx.dt, lines):
             ctx.skipped.append((self.id, f"peak at {f:.4g} Hz sits on an excited input line: the misfit follows "
                                          "the input, so it is the model's response, not a disturbance"))
             return []
@@ -130,7 +136,7 @@ class PeriodicDisturbance(Family):
             for h2 in halves:
                 fk = h2 / (2 * T)
                 if fk * span >= MIN_CYCLES and abs(fk - f) * T > 0.25 and 2 * fk * ctx.dt < 1 \
-                        and not on_input_line(U_est, fk * ctx.dt):
+                        and not on_input_line(U_est, fk * ctx.dt, lines):
                     freqs.append(float(fk))
         k = sum(1 for t in ctx.model.terms if t.family == self.id) // 2
         out = []
