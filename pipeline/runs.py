@@ -33,6 +33,7 @@ from .errors import ConfigError, InputError, SimulationError, in_file
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
+from .diagnostics.why import why_unexplained
 from .fit import FitResult, Problem, at_bounds, equation_error_start
 from .extended import extended_config
 from .model import Model
@@ -193,7 +194,8 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
                                         "final model, estimation data (noise families)"),
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
-            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history)},
+            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history),
+                                                             "why": why_unexplained(diag.history)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history,

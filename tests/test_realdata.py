@@ -179,6 +179,15 @@ def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
     for c in sq:
         assert c["gain"]["ci95"][0] <= -99 and "unbounded below" in c["reason"]
         assert f"{100 * c['gain']['relative']:+.1f} %" in c["reason"]
+    # and the verdict says why in one paragraph: an offset and the square-root outflow lower the
+    # validation error alike, and the record cannot bound either gain
+    if d["verdict"] == "unexplained_discrepancy":
+        why = d["unexplained"]["why"]
+        kinds = {r["family"]: r["kind"] for r in why["refitted"]}
+        assert kinds.get("static_nonlinearity") == "unbounded" and kinds.get("offset") == "unbounded"
+        assert "(offset, static_nonlinearity)" in why["sentence"] and "do not say which cause" in why["sentence"]
+        from pipeline.report.view import first_screen
+        assert any(w.startswith("Why no cause is named:") for w in first_screen(s)["warnings"])
 
 
 @pytest.mark.realdata

@@ -163,6 +163,9 @@ def first_screen(s: dict) -> dict:
                                f"{sig(where['time_window_s'][1], 4)} s and output range "
                                f"{sig(where['amplitude_range'][0], 4)} to {sig(where['amplitude_range'][1], 4)}"
                                if where.get("time_window_s") else "") + ".")
+        why = (where.get("why") or {}).get("sentence")
+        if why:
+            warnings.append("Why no cause is named: " + why)
     if verdict == "unexplained_discrepancy" and diag.get("not_testable"):
         # what a guard kept from being tested may be what the model misses
         warnings.append("Not tested, because these data cannot test it: " + "; ".join(

@@ -58,6 +58,14 @@ def test_out_of_vocabulary_is_unexplained(tmp_path, family, seed):
     _, s = _summary(tmp_path, family, "msd", seed)
     assert s["diagnosis"]["verdict"] == "unexplained_discrepancy"
     assert s["diagnosis"]["unexplained"]["failed_tests"]          # and says where it fails
+    # and why no cause is named: the refits it lists are the last round's, each lowering the validation
+    # error and not accepted (pipeline.diagnostics.why)
+    why = s["diagnosis"]["unexplained"]["why"]
+    assert why["sentence"]
+    last = s["diagnosis"]["history"][-1]["candidates"]
+    for r in why["refitted"]:
+        c = next(c for c in last if r["hypothesis"].endswith(c["hypothesis"]))
+        assert not c["accepted"] and c["gain"]["relative"] == r["relative"] > 0
 
 
 @pytest.mark.slow
