@@ -1068,11 +1068,46 @@ class Diagnoser:
             return nominal, None, hist
         chosen, f, dbic, g = best
         key, subject = fam.describe_choice(nominal.model, chosen)
+        runners, same = self._intersample_equivalent(nominal, chosen, f, dbic, g, before, bic0)
         finding = {"family": "intersample", **key,
-                   "description": f"{subject} {self._gain_text(g, dbic)}.", "evidence": [
+                   "description": f"{subject} {self._gain_text(g, dbic)}.{same}", "evidence": [
                        {"test": "held_out_gain", "statistic": g["relative"], "p_value": None, "ci95": g["ci95"]}],
-                   "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations()}
+                   "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations(),
+                   "runners_up": runners}
         return f, finding, hist
+
+    def _intersample_equivalent(self, nominal: FitResult, chosen: str, f: FitResult, dbic: float, g: dict,
+                                before: np.ndarray, bic0: float) -> tuple[list[dict], str]:
+        """The accepted switch's physical twin (``Intersample.equivalent``: the configured foh with half a
+        sample more input dead time, for a switch to zoh) refitted and compared on the validation part: a
+        runner-up row, and a sentence for the description when the data cannot tell them apart (the
+        validation RMSEs differ by less than ``SEPARATION_MIN_GAIN`` or the interval of their ratio
+        contains 0). The switch stays the finding: it adds nothing to the model."""
+        twin = REGISTRY["intersample"].equivalent(nominal.model, chosen, self.dt)
+        if twin is None:
+            return [], ""
+        try:
+            h = fit_output_error(twin, self.prob, start=dict(zip(nominal.names, nominal.theta)))
+        except InputError:
+            return [], ""
+        gh = _pooled(gain_ci(before, gain_resid(h, self.prob)), before.shape[1])
+        dbic_h = bic_of(h) - bic0
+        sep = gain_ci(gain_resid(f, self.prob), gain_resid(h, self.prob))   # 1 − RMSE_twin / RMSE_switch
+        alike = (sep["ci95"][0] <= 0 <= sep["ci95"][1]) or abs(sep["relative"]) < self.SEPARATION_MIN_GAIN
+        half = self.dt / 2
+        row = {"family": "input_delay", "hypothesis": f"input_delay +{half:.4g} s with {nominal.model.intersample}",
+               "accepted": False, "delta_bic": dbic_h, "delta_bic_eff": None, "prior_penalty": None, "gain": gh,
+               "separation": f"the configured {nominal.model.intersample} with an input dead time of half a sample "
+                             f"more: BIC {abs(dbic_h - dbic):.1f} {'higher' if dbic_h >= dbic else 'lower'} than the "
+                             f"switch's; validation gain {100 * gh['relative']:.1f} % vs {100 * g['relative']:.1f} % "
+                             f"(validation RMSE {100 * abs(sep['relative']):.2f} % "
+                             f"{'lower' if sep['relative'] >= 0 else 'higher'} than the switch's; 95 % interval of "
+                             f"1 − the ratio {100 * sep['ci95'][0]:+.2f} to {100 * sep['ci95'][1]:+.2f} %)"}
+        same = (f" On this record the configured {nominal.model.intersample} with an input dead time of half a "
+                f"sample more ({half:.4g} s) fits as well (validation RMSE {gh['after']:.4g} against "
+                f"{g['after']:.4g}): these data cannot tell a held input from a half-sample dead time."
+                if alike else "")
+        return [row], same
 
     @staticmethod
     def _gain_text(g: dict, dbic: float) -> str:

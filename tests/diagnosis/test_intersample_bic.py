@@ -84,3 +84,8 @@ def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, ma
     cands = {c["hypothesis"]: c for c in ctx.diag.history[0]["candidates"]}
     rival = [c for k, c in cands.items() if k.startswith(("input_delay", "unmodeled_dynamics")) and c.get("accepted")]
     assert rival and all(c["delta_bic"] > first["delta_bic"] - engine.INTERSAMPLE_TIE_BIC for c in rival)
+    # and the finding says so: the configured foh with half a sample more dead time is its runner-up, and
+    # the description says that these data cannot tell the two apart
+    twin = [r for r in first["runners_up"] if r["family"] == "input_delay"]
+    assert len(twin) == 1 and abs(twin[0]["gain"]["relative"] - first["gain"]["relative"]) < 0.01
+    assert "cannot tell a held input from a half-sample dead time" in first["description"]
