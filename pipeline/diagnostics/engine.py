@@ -1088,7 +1088,7 @@ class Diagnoser:
             return [], ""
         try:
             h = fit_output_error(twin, self.prob, start=dict(zip(nominal.names, nominal.theta)))
-        except InputError:
+        except (InputError, np.linalg.LinAlgError, ArithmeticError):     # no twin to show, not fatal
             return [], ""
         gh = _pooled(gain_ci(before, gain_resid(h, self.prob)), before.shape[1])
         dbic_h = bic_of(h) - bic0

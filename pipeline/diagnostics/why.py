@@ -10,8 +10,9 @@ real records and each means something different:
   the validation residual is so smooth that it carries well under one degree of freedom (the cascaded
   tanks: ν = 0.15–0.26, point gains 42–47 %). A point gain is then no evidence;
 * **causes of different kinds gain alike**: extensions of two or more families lower the validation error
-  by nearly the same share (within ``ALIKE`` of the best, relatively): the validation part does not say
-  which cause is at work (the cascaded tanks: an offset 47.2 %, a square-root outflow 46.5 %);
+  by nearly the same share (within ``ALIKE`` of the best, relatively) and none of them has a gain bounded
+  above 0: the validation part does not say which cause is at work (the cascaded tanks: an offset
+  47.2 %, a square-root outflow 46.5 %);
 * **a validation gain the estimation part does not support**: the interval is above 0 but the
   likelihood-ratio test with the residual's effective sample size is not significant (a sensor offset on
   the cascaded tanks, 23 % with interval 12 to 32 %, LR p = 0.017 at N_eff = 3.6), or the interval is
@@ -99,8 +100,12 @@ def why_unexplained(history: list[dict]) -> dict:
     fams = list(dict.fromkeys(r["family"] for r in alike))
     if len(fams) > 1:
         lo, hi = min(r["relative"] for r in alike), max(r["relative"] for r in alike)
-        s.append(f"Extensions of {len(fams)} different causes ({', '.join(fams)}) lower the validation error alike "
-                 f"({100 * lo:.1f} to {100 * hi:.1f} %): these data do not say which cause is at work.")
+        # "which cause" is open only when none of them has a gain bounded above 0: a bounded gain is
+        # evidence for its cause that the others' point values do not match
+        open_ = all(r["kind"] != "estimation" for r in alike)
+        s.append(f"Extensions of {len(fams)} different causes ({', '.join(fams)}) lower the validation error by "
+                 f"similar amounts ({100 * lo:.1f} to {100 * hi:.1f} %)"
+                 + (": these data do not say which cause is at work." if open_ else "."))
     if out[0]["kind"] == "not_lower":
         r = out[0]
         s.append(f"The largest, {r['hypothesis']}, has a 95 % interval of {_pct(r['ci95'][0])} to "

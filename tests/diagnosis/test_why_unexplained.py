@@ -30,7 +30,7 @@ def test_unbounded_gains_of_different_causes_are_said_to_be_inseparable():
     assert [r["kind"] for r in w["refitted"]] == ["unbounded", "unbounded", "estimation"]
     s = w["sentence"]
     assert "cannot bound the gain of 2 of them (ν ≤ 0.17" in s
-    assert "2 different causes (offset, static_nonlinearity)" in s and "46.5 to 47.0 %" in s
+    assert "2 different causes (offset, static_nonlinearity)" in s and "(46.5 to 47.0 %): these data do not say" in s
     # the bounded gain is said with its interval and the estimation part's objection, made a clause
     assert "output_offset:y has a validation gain of +23.0 % (95 % interval +12.4 % to +32.3 %), " \
            "but its estimation fit is not better by the likelihood-ratio test" in s
@@ -60,6 +60,15 @@ def test_nothing_refitted_and_nothing_lower():
     assert "none of their added-term tests was significant" in why_unexplained(none)["sentence"]
     worse = [{"iteration": 1, "candidates": [_c("offset", "offset:v", -0.05, [-0.2, 0.1], 9.0)]}]
     assert why_unexplained(worse)["sentence"] == "No refitted extension lowered the validation error."
+
+
+def test_causes_whose_gain_one_of_them_bounds_are_not_called_open():
+    hist = [{"iteration": 1, "candidates": [
+        _c("offset", "offset:v", 0.10, [0.06, 0.14], 30.0, reason=LR),
+        _c("coulomb_friction", "coulomb_friction:v:v", 0.09, [-99.0, 0.99], 0.5)]}]
+    s = why_unexplained(hist)["sentence"]
+    assert "2 different causes (offset, coulomb_friction) lower the validation error by similar amounts " \
+           "(9.0 to 10.0 %)." in s and "do not say which" not in s
 
 
 def test_the_first_screen_says_why_after_where():
