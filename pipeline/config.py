@@ -123,7 +123,9 @@ class DataCfg(_ReadCfg):
     sample_time: Annotated[Finite, Field(gt=0)] | None = None
     inputs: Union[list[str], dict[str, str]] = Field(default_factory=list)
     outputs: Union[list[str], dict[str, str]]
-    intersample: Literal["zoh", "foh"] = "zoh"
+    # zoh: held; foh: straight lines; bandlimited: the band-limited signal through the samples
+    # (pipeline/bandlimited.py)
+    intersample: Literal["zoh", "foh", "bandlimited"] = "zoh"
     remove_mean: StrictBool = False
     # largest tolerated relative deviation of a sampling interval from the median one
     max_jitter: Annotated[Finite, Field(ge=0, le=0.5)] = 0.01

@@ -86,6 +86,18 @@ class Problem:
         s = np.std(self.Y[sl], axis=0)
         return 1.0 / np.where(s > 0, s, 1.0)
 
+    def inputs(self, model: Model) -> np.ndarray:
+        """The input samples a simulation of ``model`` gets: ``U`` itself, or for
+        ``intersample: bandlimited`` U prefiltered experiment by experiment (:mod:`pipeline.bandlimited`),
+        computed once; pass ``prefiltered=True`` to :func:`simulate_states` with it."""
+        if model.intersample != "bandlimited":
+            return self.U
+        cache = self.__dict__.setdefault("_inputs_cache", {})
+        if "bandlimited" not in cache:
+            from .bandlimited import prefilter
+            cache["bandlimited"] = prefilter(self.U, tuple(self.restarts))
+        return cache["bandlimited"]
+
     def segments(self, warm: bool = False) -> list[tuple[int, int]]:
         """[start, stop) of each simulated segment, in order, covering the record: the records'
         experiments, and with ``warm`` also the warm-up start of the estimation part."""
@@ -192,8 +204,8 @@ def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: in
         if s1 <= a or s0 >= b:
             continue
         stop = min(s1, b)
-        res = simulate_states(model, prob.t[s0:stop], prob.U[s0:stop], segment_x0(model, prob, s0, x0_fit),
-                              bound=prob.bound)
+        res = simulate_states(model, prob.t[s0:stop], prob.inputs(model)[s0:stop],
+                              segment_x0(model, prob, s0, x0_fit), bound=prob.bound, prefiltered=True)
         if res.diverged_at is not None:
             return None
         out[s0:stop] = outputs(model, prob.t[s0:stop], prob.U[s0:stop], res.X, prob.out_names)
@@ -220,8 +232,8 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
             Yh[e0:e1] = Yw[e0:e1]
     if Yh is None:
         for s0, s1 in prob.segments(True):
-            res = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
-                                  bound=prob.bound)
+            res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
+                                  bound=prob.bound, prefiltered=True)
             if res.diverged_at is not None:
                 raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
                                       f"(parameters {model.params}); a parameter's physical range can be "
@@ -233,8 +245,8 @@ def states_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     """(N, nx) simulated states over the whole record, segment by segment (NaN after a divergence)."""
     X = np.full((len(prob.t), len(model.states)), np.nan)
     for s0, s1 in prob.segments(warm=False):
-        X[s0:s1] = simulate_states(model, prob.t[s0:s1], prob.U[s0:s1], segment_x0(model, prob, s0, x0),
-                                   bound=prob.bound).X
+        X[s0:s1] = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1],
+                                   segment_x0(model, prob, s0, x0), bound=prob.bound, prefiltered=True).X
     return X
 
 
@@ -461,7 +473,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         if r0 is penalty:
             m0, x00 = unpack(th0)
             a, b = prob.fit_segment()
-            why = simulate_states(m0, prob.t[a:stop], prob.U[a:stop], x00, bound=prob.bound)
+            why = simulate_states(m0, prob.t[a:stop], prob.inputs(m0)[a:stop], x00, bound=prob.bound,
+                                  prefiltered=True)
             if why.diverged_at is None:
                 _declared_output_check(m0, prob.t[a:stop], prob.U[a:stop], why.X, prob.out_names)
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"

@@ -584,11 +584,20 @@ def delayed_columns(model: Model) -> list[int] | None:
 
 
 def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, *,
-                    bound: float = 1e12) -> SimResult:
-    """Simulate from ``t[0]`` with initial state ``x0``; U is (N, nu) sampled with the record."""
+                    bound: float = 1e12, prefiltered: bool = False) -> SimResult:
+    """Simulate from ``t[0]`` with initial state ``x0``; U is (N, nu) sampled with the record.
+
+    ``model.intersample``: ``zoh`` holds each sample, ``foh`` interpolates linearly, ``bandlimited``
+    interpolates linearly between samples prefiltered by :func:`pipeline.bandlimited.prefilter` (the
+    band-limited signal through the samples). ``prefiltered``: U is already that prefiltered input
+    (:meth:`pipeline.fit.Problem.inputs`, which filters each experiment once and whole, so a simulation
+    that stops or resumes inside it sees the same input); otherwise U is filtered here as one experiment."""
     kern = get_kernel(model)
     p = np.array([model.params[k] for k in model.param_names], dtype=float)
     t = np.ascontiguousarray(t, dtype=float)
+    if model.intersample == "bandlimited" and not prefiltered:
+        from .bandlimited import prefilter
+        U = prefilter(U)
     if model.delay is not None:
         U = shifted_input(U, t, model.params[model.delay], delayed_columns(model))
     U = np.ascontiguousarray(U, dtype=float)
@@ -612,9 +621,9 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
         return SimResult(X, None)
     generic, lean = kern
     if len(pr.progs) == 0 and len(pr.limits) == 0:   # the nominal structure alone: the lean kernel
-        status = lean(U, t, int(model.substeps), model.intersample == "foh", p, x0, float(bound), X)
+        status = lean(U, t, int(model.substeps), model.intersample != "zoh", p, x0, float(bound), X)
     else:
-        status = generic(U, t, int(model.substeps), model.intersample == "foh", p, x0, pr.ops, pr.args,
+        status = generic(U, t, int(model.substeps), model.intersample != "zoh", p, x0, pr.ops, pr.args,
                          pr.consts, pr.progs, pr.limits, float(bound), X)
     if status >= 0:
         nonfinite = bool(np.any(np.isnan(X[status])))

@@ -324,7 +324,8 @@ class Diagnoser:
         e1 = prob.split.est[1]
         out = None
         if s1 >= e1 and fit.model.delay is None:
-            res = simulate_states(fit.model, prob.t[s0:e1], prob.U[s0:e1], fit.x0, bound=prob.bound)
+            res = simulate_states(fit.model, prob.t[s0:e1], prob.inputs(fit.model)[s0:e1], fit.x0,
+                                  bound=prob.bound, prefiltered=True)
             if res.diverged_at is None:
                 out = (s0, res.X)
         self._states_cache = (fit, out)
@@ -359,11 +360,13 @@ class Diagnoser:
         j = k + self.RESUME_BACK + 1
         split = after is not None and j < e1 - 1
         stop = j + 1 if split else e1
-        res = simulate_states(model, prob.t[k:stop], prob.U[k:stop], X[k - s0], bound=prob.bound)
+        res = simulate_states(model, prob.t[k:stop], prob.inputs(model)[k:stop], X[k - s0], bound=prob.bound,
+                              prefiltered=True)
         if res.diverged_at is not None:
             return None
         if split:
-            rest = simulate_states(after, prob.t[j:e1], prob.U[j:e1], res.X[-1], bound=prob.bound)
+            rest = simulate_states(after, prob.t[j:e1], prob.inputs(after)[j:e1], res.X[-1], bound=prob.bound,
+                                   prefiltered=True)
             if rest.diverged_at is not None:
                 return None
             res = replace(res, X=np.concatenate([res.X[:-1], rest.X]))

@@ -1,7 +1,7 @@
-"""``intersample``: the simulation's own assumption is wrong, the input between samples (zoh vs foh)
-or the integration step. Tested before any physical family: the nominal model is refitted with the
-other intersample behaviour and with four times the RK4 sub-steps; an alternative that lowers the
-held-out free-run error (the engine's gain test) and the estimation BIC (same parameter count) is the
+"""``intersample``: the simulation's own assumption is wrong, the input between samples (zoh, foh or
+the band-limited signal) or the integration step. Tested before any physical family: the nominal model
+is refitted with the neighbouring intersample behaviours (``OTHERS``) and with four times the RK4
+sub-steps; an alternative that lowers the held-out free-run error (the engine's gain test) and the estimation BIC (same parameter count) is the
 first finding, and the rest of the diagnosis runs on it. A band-limited input sampled and simulated
 with zoh otherwise makes null records look like friction or coloured noise."""
 
@@ -18,10 +18,15 @@ class Intersample(Family):
     def hypotheses(self, ctx):
         return []
 
+    # the interpolations tried from each configured one: its neighbours. From foh also the band-limited
+    # signal (a smooth input is not made of straight lines: the foh's in-band deficit, (ωT)²/12, reaches
+    # the output of a plant that rolls off as b/ω² as an apparent feedthrough −bT²/12·u; pipeline/bandlimited.py);
+    # from zoh not: a held input's steps are not band-limited, and the foh step comes first
+    OTHERS = {"zoh": ("foh",), "foh": ("zoh", "bandlimited"), "bandlimited": ("foh",)}
+
     def alternatives(self, model) -> list[tuple[str, object]]:
-        other = "foh" if model.intersample == "zoh" else "zoh"
-        return [(other, replace(model, intersample=other)),
-                (f"substeps={4 * model.substeps}", replace(model, substeps=min(64, 4 * model.substeps)))]
+        return [(o, replace(model, intersample=o)) for o in self.OTHERS[model.intersample]] + [
+            (f"substeps={4 * model.substeps}", replace(model, substeps=min(64, 4 * model.substeps)))]
 
     def equivalent(self, model, chosen: str, dt: float):
         """The physical reading the data cannot tell from a switch to zoh: the configured foh with an input
@@ -49,6 +54,12 @@ class Intersample(Family):
             return ({"chosen": chosen, "configured": f"substeps={model.substeps}"},
                     f"The integration step is too coarse: with {chosen.split('=')[1]} RK4 steps per sample instead "
                     f"of {model.substeps}, the simulation")
+        if chosen == "bandlimited":
+            return ({"chosen": chosen, "configured": model.intersample},
+                    f"The input between samples is the band-limited signal through its samples, smoother than "
+                    f"the configured {model.intersample}'s straight lines (data.intersample: bandlimited; "
+                    "the straight lines miss (ωT)²/12 of each frequency's amplitude, which a plant rolling "
+                    "off above its resonance turns into an apparent direct feedthrough); simulating it so")
         return ({"chosen": chosen, "configured": model.intersample},
                 f"The input between samples is better described as {chosen} than as the configured "
                 f"{model.intersample} (data.intersample: {chosen}); simulating it so")
