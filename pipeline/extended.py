@@ -4,7 +4,9 @@ The config is the run's own config with the model replaced by the final (extende
 terms written into the equations in the expression language (``pi`` included), their coefficients as
 parameters (free, starting at the fitted values, so a rerun converges to the same numbers), the
 nominal parameters at their fitted values, a sensor offset as a declared output ``<y>_measured = y + c``
-that the measured column then maps to, and a found dead time as ``model.input_delay`` (fixed).
+that the measured column then maps to, a found dead time as ``model.input_delay`` (fixed), and the
+final model's input interpolation and RK4 steps (``data.intersample``, ``model.substeps``: an intersample
+finding).
 Noise-model findings change how the model is fitted, not the model, and are not written here.
 """
 
@@ -32,6 +34,10 @@ def extended_config(canonical: dict, model: Model, config_path: Path, data_path:
     params = {k: float(v) for k, v in model.params.items() if k != model.delay}
     m["params"] = params
     m["free"] = list(dict.fromkeys([k for k in model.free if k != model.delay]))
+    # an intersample finding changes the simulation, not the equations: the chosen input interpolation
+    # and integration step are the final model's too
+    data["intersample"] = model.intersample
+    m["substeps"] = int(model.substeps)
     if model.delay is not None:
         m["input_delay"] = float(model.params[model.delay])
         if model.delay_inputs:

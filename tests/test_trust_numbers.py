@@ -174,7 +174,10 @@ def test_extended_yaml_writes_delay_offsets_and_periodic_terms_back(tmp_path):
     m = m.extend([], {"input_delay_s": 0.03}, delay="input_delay_s")
     canonical = {"name": "n", "data": {"path": "r.csv", "outputs": ["x"], "inputs": ["u"], "time": "t"},
                  "model": {"states": ["x", "v"], "inputs": ["u"], "params": {}, "free": [], "equations": {}}}
+    from dataclasses import replace
+    m = replace(m, intersample="bandlimited", substeps=8)      # an intersample finding's model
     cfg = extended_config(canonical, m, tmp_path / "c.yaml", tmp_path / "r.csv", tmp_path)
+    assert cfg["data"]["intersample"] == "bandlimited" and cfg["model"]["substeps"] == 8
     assert cfg["model"]["input_delay"] == 0.03 and "input_delay_s" not in cfg["model"]["params"]
     assert cfg["data"]["outputs"] == {"x": "x_measured"}
     assert cfg["model"]["outputs"] == {"x_measured": "x + output_offset_x"}
@@ -183,7 +186,8 @@ def test_extended_yaml_writes_delay_offsets_and_periodic_terms_back(tmp_path):
     pd.DataFrame({"t": np.arange(100) * 0.1, "u": np.sin(np.arange(100)), "x": 0.0}).to_csv(tmp_path / "r.csv")
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
     lc = load_config(tmp_path / "c.yaml")
-    assert Model.from_config(lc).delay is not None
+    back = Model.from_config(lc)
+    assert back.delay is not None and back.intersample == "bandlimited" and back.substeps == 8
 
 
 def test_two_runs_on_a_mat_record_are_byte_identical(tmp_path):
