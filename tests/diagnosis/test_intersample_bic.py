@@ -51,13 +51,13 @@ def test_foh_is_chosen_when_it_lowers_the_bic(tmp_path):
 
 
 def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
-    """The same record with the BIC of every foh fit raised above the zoh fit's (as a log-det BIC can rise on two
-    outputs while the weighted SSE falls): the SSE still falls, the gain is still positive, and the
-    choice is refused, with the reason."""
+    """The same record with the BIC of every foh (and band-limited) fit raised above the zoh fit's (as a
+    log-det BIC can rise on two outputs while the weighted SSE falls): the SSE still falls, the gain is
+    still positive, and the choice is refused, with the reason."""
     prob, model = _foh_record(tmp_path)
     real = engine.bic_of
     monkeypatch.setattr(engine, "bic_of", lambda fit, searched=0: real(fit, searched)
-                        + (1e6 if fit.model.intersample == "foh" else 0.0))
+                        + (1e6 if fit.model.intersample != "zoh" else 0.0))
     _, finding, hist = _stage(prob, model)
     assert finding is None
     row = next(r for r in hist["candidates"] if r["hypothesis"] == "foh")

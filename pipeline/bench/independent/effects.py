@@ -300,11 +300,15 @@ def heteroscedastic_noise(ctx: Ctx) -> Effect:
 
 
 def intersample(ctx: Ctx) -> Effect:
-    """The config states the wrong intersample behaviour: zoh for a smooth input, foh for held steps."""
+    """The config states the wrong intersample behaviour: zoh for a smooth input, foh for held steps.
+    The smooth input is a multisine below the Nyquist frequency, exactly band-limited, so ``bandlimited``
+    (the band-limited signal through the samples) is as right a choice as ``foh``, and closer
+    (``also_right``)."""
     right = "foh" if ctx.input_kind == "band" else "zoh"
     wrong = "zoh" if right == "foh" else "foh"
+    also = ["bandlimited"] if ctx.input_kind == "band" else []
     return Effect("intersample", acts_on={"simulation": "intersample"},
-                  params={"chosen": right, "configured": wrong}, nominal={"intersample": wrong})
+                  params={"chosen": right, "configured": wrong, "also_right": also}, nominal={"intersample": wrong})
 
 
 def none(ctx: Ctx) -> Effect:

@@ -18,11 +18,12 @@ class Intersample(Family):
     def hypotheses(self, ctx):
         return []
 
-    # the interpolations tried from each configured one: its neighbours. From foh also the band-limited
-    # signal (a smooth input is not made of straight lines: the foh's in-band deficit, (ωT)²/12, reaches
-    # the output of a plant that rolls off as b/ω² as an apparent feedthrough −bT²/12·u; pipeline/bandlimited.py);
-    # from zoh not: a held input's steps are not band-limited, and the foh step comes first
-    OTHERS = {"zoh": ("foh",), "foh": ("zoh", "bandlimited"), "bandlimited": ("foh",)}
+    # the interpolations tried from each configured one. The band-limited signal from both others: a
+    # smooth input is neither steps nor straight lines (the foh's in-band deficit, (ωT)²/12, reaches the
+    # output of a plant that rolls off as b/ω² as an apparent feedthrough −bT²/12·u; pipeline/bandlimited.py),
+    # and zoh is the contract's default, so a smooth input configured with it must be able to reach it in
+    # one step (the stage chooses once); on a held input it rings at every step and loses
+    OTHERS = {"zoh": ("foh", "bandlimited"), "foh": ("zoh", "bandlimited"), "bandlimited": ("foh", "zoh")}
 
     def alternatives(self, model) -> list[tuple[str, object]]:
         return [(o, replace(model, intersample=o)) for o in self.OTHERS[model.intersample]] + [
@@ -57,9 +58,11 @@ class Intersample(Family):
         if chosen == "bandlimited":
             return ({"chosen": chosen, "configured": model.intersample},
                     f"The input between samples is the band-limited signal through its samples, smoother than "
-                    f"the configured {model.intersample}'s straight lines (data.intersample: bandlimited; "
-                    "the straight lines miss (ωT)²/12 of each frequency's amplitude, which a plant rolling "
-                    "off above its resonance turns into an apparent direct feedthrough); simulating it so")
+                    f"the configured {model.intersample}'s "
+                    + ("straight lines (data.intersample: bandlimited; the straight lines miss (ωT)²/12 of each "
+                       "frequency's amplitude, which a plant rolling off above its resonance turns into an "
+                       "apparent direct feedthrough)" if model.intersample == "foh" else
+                       "steps (data.intersample: bandlimited)") + "; simulating it so")
         return ({"chosen": chosen, "configured": model.intersample},
                 f"The input between samples is better described as {chosen} than as the configured "
                 f"{model.intersample} (data.intersample: {chosen}); simulating it so")
