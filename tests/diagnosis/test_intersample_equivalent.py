@@ -72,4 +72,11 @@ def test_a_switch_to_foh_has_no_physical_twin(tmp_path):
         d = analyse(load_config(Path(case.dir) / "config.yaml")).summary["diagnosis"]
     first = d["findings"][0]
     assert first["family"] == "intersample" and first["chosen"] in ("foh", "bandlimited")
-    assert first["runners_up"] == [] and "half-sample dead time" not in first["description"]
+    assert not [r for r in first["runners_up"] if r["family"] == "input_delay"]
+    assert "half-sample dead time" not in first["description"]
+    # this plant is slow beside the band: foh and the band-limited signal fit alike (0.7 BIC units apart),
+    # and the finding says so instead of naming one as if the data had chosen it
+    other = {"foh": "bandlimited", "bandlimited": "foh"}[first["chosen"]]
+    tie = [r for r in first["runners_up"] if r["family"] == "intersample" and r["hypothesis"] == other]
+    assert len(tie) == 1 and tie[0]["accepted"] and tie[0]["delta_bic"] - first["delta_bic"] < 2.0
+    assert "these data do not separate them" in first["description"]
