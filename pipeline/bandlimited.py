@@ -25,23 +25,22 @@ resumes inside the experiment (:meth:`pipeline.fit.Problem.inputs`)."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy import signal
 
 TAPS = 63
-_FIR: list[np.ndarray] = []
 
 
+@lru_cache(maxsize=1)
 def fir() -> np.ndarray:
     """The prefilter's taps (symmetric, odd length, sum = H(0) = 1), designed once."""
-    if not _FIR:
-        f = np.linspace(0.0, 1.0, 1025)              # fraction of the Nyquist frequency
-        x = 0.5 * np.pi * f                          # ωT/2
-        s = np.sin(x)
-        h = np.where(x > 0, (x / np.where(x > 0, s, 1.0)) ** 2, 1.0)
-        taps = signal.firwin2(TAPS, f, h)
-        _FIR.append(taps / taps.sum())               # exactly 1 at 0: the window leaves it 3.4e-4 high
-    return _FIR[0]
+    f = np.linspace(0.0, 1.0, 1025)              # fraction of the Nyquist frequency
+    x = 0.5 * np.pi * f                          # ωT/2
+    h = np.where(x > 0, (x / np.where(x > 0, np.sin(x), 1.0)) ** 2, 1.0)
+    taps = signal.firwin2(TAPS, f, h)
+    return taps / taps.sum()                     # exactly 1 at 0: the window leaves it 3.4e-4 high
 
 
 def prefilter(U: np.ndarray, starts: tuple[int, ...] = ()) -> np.ndarray:

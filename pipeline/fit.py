@@ -32,6 +32,7 @@ import math
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from functools import cached_property
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -90,13 +91,12 @@ class Problem:
         """The input samples a simulation of ``model`` gets: ``U`` itself, or for
         ``intersample: bandlimited`` U prefiltered experiment by experiment (:mod:`pipeline.bandlimited`),
         computed once; pass ``prefiltered=True`` to :func:`simulate_states` with it."""
-        if model.intersample != "bandlimited":
-            return self.U
-        cache = self.__dict__.setdefault("_inputs_cache", {})
-        if "bandlimited" not in cache:
-            from .bandlimited import prefilter
-            cache["bandlimited"] = prefilter(self.U, tuple(self.restarts))
-        return cache["bandlimited"]
+        return self._u_bandlimited if model.intersample == "bandlimited" else self.U
+
+    @cached_property
+    def _u_bandlimited(self) -> np.ndarray:
+        from .bandlimited import prefilter
+        return prefilter(self.U, tuple(self.restarts))
 
     def segments(self, warm: bool = False) -> list[tuple[int, int]]:
         """[start, stop) of each simulated segment, in order, covering the record: the records'

@@ -114,13 +114,19 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
                           "block": None, "dof": dof, "n": len(b2)}}
 
 
+def is_unbounded(g: dict) -> bool:
+    """Did the interval's lower end reach the clip at −99 (an RMSE ratio of 100)? The record cannot bound
+    the gain from below (:func:`unbounded_note`)."""
+    return g["ci95"][0] <= -math.expm1(L_CLIP) + 1e-9
+
+
 def unbounded_note(g: dict) -> str:
     """The words a rejected extension's reason gets when its interval reached the clip at −99 (an RMSE
     ratio of 100): the record cannot bound the gain from below, which is not the same as a gain near 0.
     On the cascaded tanks (lag-1 autocorrelation 0.993 on the validation record) a square-root outflow
     lowered the validation RMSE by 47 % with ν = 0.17 degrees of freedom. Empty otherwise."""
-    lo, dof = g["ci95"][0], g.get("bootstrap", {}).get("dof")
-    if lo > -math.expm1(L_CLIP) + 1e-9 or dof is None:
+    dof = g.get("bootstrap", {}).get("dof")
+    if not is_unbounded(g) or dof is None:
         return ""
     return (f" (the interval is unbounded below: ν = {dof:.2g} degrees of freedom; the validation residuals "
             f"are too smooth for this record to bound the gain, whose point value is {100 * g['relative']:+.1f} %)")

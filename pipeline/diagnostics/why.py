@@ -23,16 +23,10 @@ candidate record) so that the verdict reads as a conclusion, not as a list."""
 
 from __future__ import annotations
 
-import math
-
-from .gain import L_CLIP
+from .gain import is_unbounded
 
 ALIKE = 0.8          # another family's point gain at least this share of the best one's is "alike"
 MAX_LISTED = 4       # refitted extensions named in the sentence
-
-
-def _unbounded(g: dict) -> bool:
-    return g["ci95"][0] <= -math.expm1(L_CLIP) + 1e-9
 
 
 def _pct(x: float) -> str:
@@ -72,7 +66,7 @@ def why_unexplained(history: list[dict]) -> dict:
     out = []
     for c in rows:
         g = c["gain"]
-        kind = "unbounded" if _unbounded(g) else ("not_lower" if g["ci95"][0] <= 0 else "estimation")
+        kind = "unbounded" if is_unbounded(g) else ("not_lower" if g["ci95"][0] <= 0 else "estimation")
         label = c["hypothesis"] if c["family"] != "intersample" else f"intersample {c['hypothesis']}"
         out.append({"family": c["family"], "hypothesis": label, "relative": g["relative"],
                     "ci95": list(g["ci95"]), "dof": (g.get("bootstrap") or {}).get("dof"), "kind": kind,
