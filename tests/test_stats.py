@@ -83,6 +83,21 @@ def test_added_terms_wald_size_and_power():
     assert w.p_value < 1e-6 and w.beta[0] == pytest.approx(0.2, abs=0.06)
 
 
+def test_added_terms_share_is_the_unfiltered_projection():
+    """``share``: the residual sum of squares a least-squares step on the added columns removes, before the
+    GLS filter (the linearised refit's SSE drop). For a constant column and no current parameters it is
+    N·ē²/Σe² in closed form. A smooth residual around a constant offset (AR(1), φ = 0.98) is where the
+    GLS ``r2`` nearly differences the constant away and understates it."""
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(11)
+    n = 2000
+    e = 0.3 + lfilter([1], [1, -0.98], 0.05 * rng.standard_normal(n))
+    S = np.ones((n, 1))
+    w = stats.added_terms_test(e, np.zeros((n, 0)), S)
+    assert w.share == pytest.approx(n * e.mean() ** 2 / (e @ e), rel=1e-9)
+    assert w.share > 0.5 and w.r2 < 0.2 * w.share
+
+
 def test_holm_step_down():
     out = stats.holm({"a": 0.001, "b": 0.015, "c": 0.03, "d": 0.5}, 0.05)
     # 0.001 ≤ .05/4; 0.015 ≤ .05/3; 0.03 > .05/2 → stop

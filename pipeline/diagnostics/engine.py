@@ -285,6 +285,14 @@ def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
     return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
 
 
+def _share(w: stats.WaldResult) -> float:
+    """The share of the residual's sum of squares an added-term test's columns remove by least squares
+    on the *unfiltered* residual: the linearised refit's SSE drop (a Gauss–Newton step). Not the GLS
+    test's ``r2``: its AR prewhitening filter nearly differences a smooth residual, and an offset's
+    near-constant sensitivity then looked like 2 % of the residual when its refit removed 74 %."""
+    return w.r2 if w.share is None else w.share
+
+
 class Diagnoser:
     def __init__(self, prob: Problem, *, alpha: float, families: list[str], max_findings: int, seed: int,
                  n_boot: int = 400, max_delay_s: float | None = None, dt: float = 1.0, couplings: bool = False):
@@ -988,15 +996,15 @@ class Diagnoser:
         always = [c for c in todo if not c.runner_up and (c.fit is not None or not REGISTRY[c.hyp.family].screened)]
         seconds = [c for c in todo if c.runner_up]
         todo = [c for c in todo if not c.runner_up and c.fit is None and REGISTRY[c.hyp.family].screened]
-        best = max([c.wald.r2 for c in todo] or [0.0])
-        ranked = sorted(todo, key=lambda c: -c.wald.r2)
-        keep = [c for c in ranked if c.wald.r2 >= REFIT_SHARE * best][:MAX_REFITS]
+        best = max([_share(c.wald) for c in todo] or [0.0])
+        ranked = sorted(todo, key=lambda c: -_share(c.wald))
+        keep = [c for c in ranked if _share(c.wald) >= REFIT_SHARE * best][:MAX_REFITS]
         kept = {id(c) for c in keep}      # by identity: Candidate's dataclass equality compares arrays
         for c in todo:
             if id(c) not in kept:
-                c.reason = (f"not refitted: its added-term test explains {100 * c.wald.r2:.2g} % of the residual, "
+                c.reason = (f"not refitted: its added terms explain {100 * _share(c.wald):.2g} % of the residual, "
                             + (f"under {REFIT_SHARE:g} x the {100 * best:.2g} % of the strongest candidate"
-                               if c.wald.r2 < REFIT_SHARE * best else
+                               if _share(c.wald) < REFIT_SHARE * best else
                                f"and {MAX_REFITS} candidates explain more"))
         fams = {c.hyp.family for c in always + keep}
         for c in seconds:

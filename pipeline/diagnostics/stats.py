@@ -368,6 +368,7 @@ class WaldResult:
     dof: int
     p_value: float
     r2: float = 0.0      # share of the residual's sum of squares the added columns explain (partial R²)
+    share: float | None = None   # the same share before the GLS filter: the linearised refit's SSE drop
 
 
 def column_basis(J: np.ndarray) -> np.ndarray:
@@ -406,6 +407,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     S = np.atleast_2d(S.T).T
     e = np.asarray(e, float)
     J = np.asarray(J, float).reshape(len(e), -1)
+    share = None
     if GLS:
         # feasible GLS (Cochrane & Orcutt 1949): an AR(p) (Yule–Walker, p ≤ GLS_PMAX by AIC) fitted to
         # the unrestricted OLS residual filters e, J and S alike, so the long-run variance below is that
@@ -415,6 +417,8 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
         else:
             S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
         eu0 = e - S0 @ np.linalg.lstsq(S0, e, rcond=None)[0]
+        e0 = float(e @ e)
+        share = float(1.0 - float(eu0 @ eu0) / e0) if e0 > 0 else 0.0
         _, a = prewhiten_ar(eu0, GLS_PMAX)
         if len(a) and len(e) > 4 * (len(a) + S.shape[1] + J.shape[1]):
             e, J, S = _ar_filter(e, a), _ar_filter(J, a), _ar_filter(S, a)
@@ -437,7 +441,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     p = float(stats.f.sf(stat * (nu - q + 1) / (nu * q), q, nu - q + 1))
     ee = float(e @ e)
     r2 = float(1.0 - float(eu @ eu) / ee) if ee > 0 else 0.0
-    return WaldResult(beta, V, stat, q, p, r2)
+    return WaldResult(beta, V, stat, q, p, r2, r2 if share is None else share)
 
 
 GLS = True
