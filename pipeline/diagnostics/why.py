@@ -39,6 +39,9 @@ def _but(reason: str) -> str:
     return ("its estimation fit is not better" + reason[len(pre):]) if reason.startswith(pre) else reason
 
 
+LOOKED_AHEAD = "looked ahead: "   # the engine's mark on a reason (Diagnoser._lookahead)
+
+
 def refitted_not_accepted(history: list[dict]) -> list[dict]:
     """The last round's candidates that were refitted, lowered the validation error (point gain > 0) and
     were not accepted, largest gain first (intersample rows included: they are refits too)."""
@@ -109,4 +112,8 @@ def why_unexplained(history: list[dict]) -> dict:
     if est is not None:
         s.append(f"{est['hypothesis']} has a validation gain of {_pct(est['relative'])} (95 % interval "
                  f"{_pct(est['ci95'][0])} to {_pct(est['ci95'][1])}), but {_but(est['reason'])}.")
+    ahead = next((r for r in out if LOOKED_AHEAD in r["reason"]), None)
+    if ahead is not None:
+        s.append(f"Taken as the model for one more round, to look for a second cause beside it, "
+                 f"{ahead['hypothesis']}: {ahead['reason'].split(LOOKED_AHEAD, 1)[1]}.")
     return {"refitted": out, "sentence": " ".join(s)}

@@ -79,3 +79,16 @@ def test_the_first_screen_says_why_after_where():
     w = first_screen(s)["warnings"]
     i = next(i for i, x in enumerate(w) if x.startswith("Where the model fails"))
     assert w[i + 1].startswith("Why no cause is named: Refitted on the final model") and "offset:y +47.0 %" in w[i + 1]
+
+
+def test_a_look_ahead_that_found_no_second_cause_is_said():
+    reason = ("validation error not lower with 95 % confidence; looked ahead: with offset:v in the model no "
+              "further extension was accepted")
+    hist = [{"iteration": 1, "candidates": [
+        _c("offset", "offset:v", 0.49, [-1.15, 0.88], 0.4, reason=reason),
+        _c("dead_zone", "dead_zone:u", 0.09, [-1.8, 0.7], 0.5)]}]
+    s = why_unexplained(hist)["sentence"]
+    assert s.endswith("Taken as the model for one more round, to look for a second cause beside it, offset:v: "
+                      "with offset:v in the model no further extension was accepted.")
+    plain = [{"iteration": 1, "candidates": [_c("offset", "offset:v", 0.49, [-1.15, 0.88], 0.4)]}]
+    assert "one more round" not in why_unexplained(plain)["sentence"]
