@@ -133,6 +133,12 @@ def first_screen(s: dict) -> dict:
                      f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} % for this validation input"
                      + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
                         if g.get("p_not_lower") is not None else "") + ").")
+        gg = f0.get("gain_given")
+        if gg:      # accepted by the look-ahead: its own interval is not above 0, its gain given the other is
+            lines.append(f"Alone, its interval is not above 0: {gg.get('with')}'s misfit was still in the validation "
+                         f"residual. With {gg.get('with')} in the model too, it lowers the validation RMSE by "
+                         f"{sig(100 * gg['relative'], 3)} % (95 % interval {sig(100 * gg['ci95'][0], 3)} to "
+                         f"{sig(100 * gg['ci95'][1], 3)} %).")
         if len(findings) > 1:
             lines.append(f"{plural(len(findings), 'partial finding' if partial else 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)

@@ -101,6 +101,19 @@ def test_first_screen_says_how_much_is_missed_the_cause_and_the_gain():
     assert fs["warnings"] == []
 
 
+def test_first_screen_gives_a_look_ahead_finding_its_gain_given_the_other():
+    s = _summary(62.39, 99.9)
+    f0 = s["diagnosis"]["findings"][0]
+    f0["gain"] = {"relative": 0.49, "ci95": [-1.147, 0.879]}
+    f0["gain_given"] = {"with": "dead_zone:u", "relative": 0.938, "ci95": [0.935, 0.940]}
+    text = " ".join(view.first_screen(s)["lines"])
+    assert "49 % (95 % interval -115 to 87.9 %" in text
+    assert ("Alone, its interval is not above 0: dead_zone:u's misfit was still in the validation residual. "
+            "With dead_zone:u in the model too, it lowers the validation RMSE by 93.8 % (95 % interval 93.5 "
+            "to 94 %).") in text
+    assert "Alone" not in " ".join(view.first_screen(_summary(62.39, 97.6))["lines"])
+
+
 def test_negative_fit_and_unexplained_verdict_are_warned_plainly():
     fs = view.first_screen(_summary(-328.0, -126.0))
     assert len(fs["warnings"]) == 1 and "unusable" in fs["warnings"][0] and "-126 %" in fs["warnings"][0]
