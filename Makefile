@@ -7,7 +7,7 @@ CONFIG ?= configs/demo.yaml
 OUT    ?=
 PYTEST_ARGS ?=
 
-.PHONY: install report diagnose test bench bench-diagnosis clean
+.PHONY: install report diagnose test bench bench-diagnosis bench-two-causes clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -41,6 +41,10 @@ bench: $(BENCH_VENV)/.installed
 # SEEDS=test for the held-out seeds; writes its own section of BENCHMARKS.md
 bench-diagnosis: $(STAMP)
 	@$(BIN)/python -m pipeline.bench.diagnosis $(if $(QUICK),--quick,) $(if $(SEEDS),--seeds $(SEEDS),)
+
+# two hidden causes at once, on solve_ivp records (pipeline.bench.two_causes); writes its own section
+bench-two-causes: $(STAMP)
+	@$(BIN)/python -m pipeline.bench.two_causes $(if $(SEEDS),--seeds $(SEEDS),)
 
 clean:
 	rm -rf $(VENV) $(BENCH_VENV) build *.egg-info .pytest_cache

@@ -75,3 +75,21 @@ def test_a_section_without_notes_is_replaced_whole(tmp_path, monkeypatch):
     assert bm.main(["--only", "sec", "--out", str(out)]) == 0
     text = out.read_text()
     assert "| new table |" in text and bm.NOTES not in text and "| old table |" not in text
+
+
+def test_two_cause_bench_rewrites_only_its_own_section(tmp_path):
+    """The two-cause bench's table goes between its own markers; the diagnosis block and the rest stay;
+    a record counts as right only when both causes' families are named."""
+    from pipeline.bench import two_causes as tc
+    path = tmp_path / "B.md"
+    path.write_text(OLD)
+    rows = [{"combo": "deadzone+offset", "seed": 1, "verdict": "discrepancy", "findings": ["offset", "dead_zone"],
+             "look_ahead": True, "right": True, "seconds": 1.0},
+            {"combo": "deadzone+offset", "seed": 2, "verdict": "unexplained_discrepancy", "findings": [],
+             "look_ahead": False, "right": False, "seconds": 1.0}]
+    for _ in range(2):          # appended once, then replaced in place
+        tc.write_section(path, tc.render(rows, (1, 2), 3.0), tc.START, tc.END)
+    text = path.read_text()
+    assert text.count(tc.START) == 1 and text.startswith(OLD.rstrip())
+    assert "**Both named: 1/2.**" in text
+    assert "| deadzone+offset | 1/2 | ✓ offset, dead_zone (look-ahead); ✗ unexplained_discrepancy |" in text

@@ -437,11 +437,12 @@ def _seed_words(name: str) -> str:
     return f"{name} seeds {list(SEED_SETS[name])} for this table ({sets})."
 
 
-def write_section(path: Path, section: str) -> None:
-    """Replace this bench's marked section in BENCHMARKS.md, or append it; other sections are kept."""
+def write_section(path: Path, section: str, start: str = START, end: str = END) -> None:
+    """Replace a bench's section marked ``start`` … ``end`` in BENCHMARKS.md (this bench's by default), or
+    append it; other sections are kept."""
     text = path.read_text() if path.exists() else "# Benchmarks\n"
-    if START in text and END in text:
-        a, b = text.index(START), text.index(END) + len(END)
+    if start in text and end in text:
+        a, b = text.index(start), text.index(end) + len(end)
         text = text[:a] + section.strip() + text[b:]
     else:
         text = text.rstrip() + "\n\n" + section

@@ -308,6 +308,12 @@ def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
     return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
 
 
+def _p_text(p: float) -> str:
+    """"= 0.0123", or "< 1e-16" where the χ² tail is below double precision's resolution near 1 (it
+    underflows to 0 in the summary; "p = 0" would claim certainty)."""
+    return f"= {p:.3g}" if p >= 1e-16 else "< 1e-16"
+
+
 def _share(w: stats.WaldResult) -> float:
     """The share of the residual's sum of squares an added-term test's columns remove by least squares
     on the *unfiltered* residual: the linearised refit's SSE drop (a Gauss–Newton step). Not the GLS
@@ -1349,7 +1355,7 @@ class Diagnoser:
         ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
         worth = (f"given {second.hyp.key}, its validation gain is {100 * g['relative']:+.1f} % "
                  f"(95 % interval {100 * g['ci95'][0]:+.1f} to {100 * g['ci95'][1]:+.1f} %; likelihood-ratio "
-                 f"p = {lr.p_value:.3g})")
+                 f"p {_p_text(lr.p_value)})")
         _log(f"  look-ahead: {second.hyp.key} accepted on top; {first.hyp.key} {worth}")
         if not ok:
             first.reason += f"; {LOOKED_AHEAD}{worth}, not significantly better"
@@ -1603,7 +1609,7 @@ class Diagnoser:
             desc += (f" Alone, the interval of its gain was not above 0 ({c.given['with']}'s misfit was still in the "
                      f"validation residual); with {c.given['with']} in the model too, it lowers the validation error by "
                      f"{100 * gg['relative']:.1f} % (95 % CI {100 * gg['ci95'][0]:.1f} to {100 * gg['ci95'][1]:.1f} %; "
-                     f"likelihood-ratio p = {c.given['lr_p_value']:.3g}).")
+                     f"likelihood-ratio p {_p_text(c.given['lr_p_value'])}).")
             f["gain_given"] = {"with": c.given["with"], **gg, "lr_p_value": c.given["lr_p_value"]}
         f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic, delta_bic_eff=c.delta_bic_eff,
                  prior_penalty=c.prior_penalty,

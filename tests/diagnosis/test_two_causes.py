@@ -1,10 +1,11 @@
 """Issue 8, two causes at once: both named within ``max_findings``.
 
-Records made here with ``scipy.integrate.solve_ivp`` on a continuous-time input (a sum of sines),
-sharing no code with the detector; a mass–spring–damper m x'' = F(u) − c x' − k x + effects:
+Records made by ``pipeline.bench.two_causes.record`` (``scipy.integrate.solve_ivp`` on a continuous-time
+input, a sum of sines), sharing no code with the detector; a mass–spring–damper
+m x'' = F(u) − c x' − k x + effects:
 
-* friction + offset, as on a real positioning stage: − Fc·sgn(x') + d (sgn smoothed over 1e-3 of
-  the velocity range, as a real friction characteristic is);
+* friction + offset, as on a real positioning stage: − Fc·sgn(x') + d (sgn(x') smoothed as tanh(x'/1e-3),
+  as a real friction characteristic is);
 * input saturation + cubic stiffness: F(u) = clip(u, −L, L) and − k3 x³;
 * a dead zone + offset, and input saturation + offset: F(u) = sgn(u)·max(|u| − w, 0) or clip(u, −L, L),
   and + d. Each cause alone leaves the other's smooth misfit in the validation residual, so neither
@@ -18,59 +19,14 @@ import contextlib
 import io
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
 import pytest
-import yaml
-from scipy.integrate import solve_ivp
 
+from pipeline.bench.two_causes import record
 from pipeline.config import load_config
 from pipeline.runs import analyse
 
-M, C, K = 1.0, 0.6, 4.0
-
-
-def _input(seed):
-    rng = np.random.default_rng(seed)
-    f = rng.uniform(0.02, 0.6, 8)
-    ph = rng.uniform(0, 2 * np.pi, 8)
-    a = rng.uniform(0.5, 1.0, 8)
-    return lambda s: np.sum(a * np.sin(2 * np.pi * f * np.asarray(s)[..., None] + ph), axis=-1) / 2.0
-
-
-def _record(tmp: Path, name: str, seed: int, *, fc=0.0, d=0.0, L=None, k3=0.0, w=0.0, n=4000,
-            dt=0.02) -> Path:
-    t = np.arange(n) * dt
-    u = _input(seed)
-    vscale = 1.0
-
-    def F(s):
-        x = u(s)
-        if w:
-            x = np.sign(x) * np.maximum(np.abs(x) - w, 0.0)
-        return np.clip(x, -L, L) if L is not None else x
-
-    def f(s, z):
-        x, v = z
-        return [v, (F(s) - C * v - K * x - k3 * x ** 3 - fc * np.tanh(v / (1e-3 * vscale)) + d) / M]
-
-    sol = solve_ivp(f, (0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-9, atol=1e-11, max_step=dt / 2, method="LSODA")
-    x = sol.y[0]
-    rng = np.random.default_rng(seed + 7)
-    y = x + 0.02 * np.std(x) * rng.standard_normal(n)
-    folder = tmp / name
-    folder.mkdir()
-    pd.DataFrame({"t": t, "u": u(t), "x": y}).to_csv(folder / "data.csv", index=False)
-    cfg = {"name": name, "seed": seed,
-           "data": {"path": "data.csv", "time": "t", "inputs": ["u"], "outputs": ["x"], "intersample": "foh",
-                    "remove_mean": False},
-           "model": {"states": ["x", "v"], "inputs": ["u"], "params": {"m": M, "c": 0.5, "k": 3.5},
-                     "free": ["c", "k"], "equations": {"x": "v", "v": "(u - c*v - k*x)/m"},
-                     "initial": {"x": 0.0, "v": 0.0}},
-           "split": {"validation_fraction": 0.3},
-           "diagnose": {"families": "all", "alpha": 0.01, "max_findings": 3}}
-    (folder / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
-    return folder / "config.yaml"
+# the generator is the two-cause bench's (pipeline/bench/two_causes.py: solve_ivp, no detector code)
+_record = record
 
 
 def _diagnosis(path: Path) -> dict:
