@@ -1311,8 +1311,6 @@ class Diagnoser:
         effective_bic(cands, current)
         return Round(cands, skipped, inter, hist if inter_job is not None else None, last_p, last_r2)
 
-    LOOKAHEAD_GAIN = 0.0   # the point validation gain a pending extension needs for a look-ahead
-
     def _lookahead(self, current: FitResult, cands: list[Candidate], it: int, tests_of):
         """Two causes at once, when no single extension is accepted: each alone leaves the other's smooth
         misfit in the validation residual, so the interval of its gain (:mod:`.gain`, which counts the
@@ -1328,7 +1326,7 @@ class Diagnoser:
         round) or None."""
         pending = [c for c in cands if not c.accepted and c.fit is not None and c.gain is not None
                    and c.lr is not None and c.delta_bic is not None and c.delta_bic < 0
-                   and c.gain["relative"] > self.LOOKAHEAD_GAIN and c.lr.p_value < self.alpha]
+                   and c.gain["relative"] > 0 and c.lr.p_value < self.alpha]
         first = choose(pending)
         if first is None:
             return None
