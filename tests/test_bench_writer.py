@@ -93,3 +93,14 @@ def test_two_cause_bench_rewrites_only_its_own_section(tmp_path):
     assert text.count(tc.START) == 1 and text.startswith(OLD.rstrip())
     assert "**Both named: 1/2.**" in text
     assert "| deadzone+offset | 1/2 | ✓ offset, dead_zone (look-ahead); ✗ unexplained_discrepancy |" in text
+
+
+def test_two_cause_bench_refuses_bad_options_before_running(tmp_path, capsys):
+    import pytest
+    from pipeline.bench import two_causes as tc
+    for argv, says in ((["--seeds", "x"], "--seeds: expected comma-separated integers"),
+                       (["--workers", "0"], "--workers: expected a positive integer"),
+                       (["--out", str(tmp_path / "missing" / "B.md")], "--out: the folder of")):
+        with pytest.raises(SystemExit) as e:
+            tc.main(argv)
+        assert e.value.code == 2 and says in capsys.readouterr().err

@@ -156,6 +156,11 @@ def main(argv=None) -> int:
         seeds = tuple(int(s) for s in a.seeds.split(","))
     except ValueError:
         ap.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
+    if a.workers < 1:
+        ap.error(f"--workers: expected a positive integer, got {a.workers}")
+    for opt, path in (("--out", a.out), ("--json", a.json)):
+        if path and not Path(path).resolve().parent.is_dir():
+            ap.error(f"{opt}: the folder of {path} does not exist")
     os.environ.setdefault("MPLBACKEND", "Agg")
     jobs = [(c, s) for c in COMBOS for s in seeds]
     t0 = time.perf_counter()
