@@ -687,16 +687,24 @@ class Diagnoser:
         self._round = (fit, ctx, fams, results)
         return self._lazy_lr(fit, ctx, fams, results, out), ctx.skipped
 
+    def _held_out(self, base: FitResult, before: np.ndarray, fit: FitResult, searched: int,
+                  rng) -> tuple[dict, stats.TestResult, bool]:
+        """``fit``'s held-out gain over ``base`` (whose validation residuals are ``before``), pooled over
+        outputs, its likelihood-ratio test against ``base`` with the effective sample size, and the rule
+        that accepts an extension: the gain's 95 % lower bound above 0 and LR p below α."""
+        g = _pooled(gain_ci(before, gain_resid(fit, self.prob), rng, self.n_boot), before.shape[1])
+        lr = lr_against(base, fit, self.alpha, searched)
+        return g, lr, g["ci95"][0] > 0 and lr.p_value < self.alpha
+
     def _weigh(self, c: Candidate, current: FitResult, before: np.ndarray, bic0: float, rng) -> None:
         """A refitted candidate's held-out gain, ΔBIC and likelihood-ratio test against ``current``, and
         its acceptance: the gain's 95 % lower bound above 0 and LR p below α."""
         if c.fit is None:
             c.reason = c.reason or "no extension estimated"
             return
-        c.gain = _pooled(gain_ci(before, gain_resid(c.fit, self.prob), rng, self.n_boot), before.shape[1])
+        c.gain, lr, c.accepted = self._held_out(current, before, c.fit, len(c.hyp.searched), rng)
+        c.lr = lr
         c.delta_bic = bic_of(c.fit, len(c.hyp.searched)) - bic0
-        lr = c.lr = lr_against(current, c.fit, self.alpha, len(c.hyp.searched))
-        c.accepted = c.gain["ci95"][0] > 0 and lr.p_value < self.alpha
         c.reason = "accepted" if c.accepted else (
             "validation error not lower with 95 % confidence" + unbounded_note(c.gain) if c.gain["ci95"][0] <= 0
             else f"estimation fit not better by the likelihood-ratio test with the effective sample size "
@@ -1346,11 +1354,8 @@ class Diagnoser:
         if alone is None:
             first.reason += f"; {LOOKED_AHEAD}{second.hyp.key} could not be refitted without it"
             return None
-        before = gain_resid(alone, self.prob)
-        g = _pooled(gain_ci(before, gain_resid(second.fit, self.prob), np.random.default_rng([self.seed, it, 1]),
-                            self.n_boot), before.shape[1])
-        lr = lr_against(alone, second.fit, self.alpha, len(first.hyp.searched))
-        ok = g["ci95"][0] > 0 and lr.p_value < self.alpha
+        g, lr, ok = self._held_out(alone, gain_resid(alone, self.prob), second.fit, len(first.hyp.searched),
+                                   np.random.default_rng([self.seed, it, 1]))
         worth = (f"given {second.hyp.key}, its validation gain is {100 * g['relative']:+.1f} % "
                  f"(95 % interval {100 * g['ci95'][0]:+.1f} to {100 * g['ci95'][1]:+.1f} %; likelihood-ratio "
                  f"p {_p_text(lr.p_value)})")

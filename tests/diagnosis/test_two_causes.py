@@ -25,9 +25,6 @@ from pipeline.bench.two_causes import record
 from pipeline.config import load_config
 from pipeline.runs import analyse
 
-# the generator is the two-cause bench's (pipeline/bench/two_causes.py: solve_ivp, no detector code)
-_record = record
-
 
 def _diagnosis(path: Path) -> dict:
     with contextlib.redirect_stderr(io.StringIO()):
@@ -42,13 +39,13 @@ def _families(path: Path) -> list[str]:
 def test_friction_and_offset_both_named(tmp_path, seed):
     """In open loop a constant force d and a sensor offset d/k differ only in the start transient
     (x(0) = 0 is known): either offset form counts as the offset (seed 1003 names the sensor form)."""
-    fams = _families(_record(tmp_path, f"friction-offset-{seed}", seed, fc=0.15, d=0.2))
+    fams = _families(record(tmp_path, f"friction-offset-{seed}", seed, fc=0.15, d=0.2))
     assert "coulomb_friction" in fams and ("offset" in fams or "output_offset" in fams)
 
 
 @pytest.mark.parametrize("seed", [1002, 1003])
 def test_saturation_and_cubic_stiffness_both_named(tmp_path, seed):
-    fams = _families(_record(tmp_path, f"sat-cubic-{seed}", seed, L=0.6, k3=3.0))
+    fams = _families(record(tmp_path, f"sat-cubic-{seed}", seed, L=0.6, k3=3.0))
     assert "input_saturation" in fams and "cubic_stiffness" in fams
 
 
@@ -59,7 +56,7 @@ def test_dead_zone_and_offset_both_named(tmp_path, seed):
     one record, where its refit removes 74 %), so the refit screen must use the unfiltered share; and
     whichever cause comes first, its gain alone is not bounded (−115 % to +88 % for a 49 % point gain
     on another seed), so both are named through the look-ahead, each with its gain given the other."""
-    d = _diagnosis(_record(tmp_path, f"deadzone-offset-{seed}", seed, w=0.15, d=0.2))
+    d = _diagnosis(record(tmp_path, f"deadzone-offset-{seed}", seed, w=0.15, d=0.2))
     fams = [f["family"] for f in d["findings"]]
     assert "dead_zone" in fams and ("offset" in fams or "output_offset" in fams)
     dz = next(f for f in d["findings"] if f["family"] == "dead_zone")
@@ -73,5 +70,5 @@ def test_dead_zone_and_offset_both_named(tmp_path, seed):
 def test_saturation_and_offset_both_named(tmp_path, seed):
     """Seeds 1002 and 1003 name both without the look-ahead; 2003 and 2004 are the records on which
     the need for it was found (input saturation first, +45.5 % alone with the interval −58 % to +81 %)."""
-    fams = _families(_record(tmp_path, f"sat-offset-{seed}", seed, L=0.6, d=0.2))
+    fams = _families(record(tmp_path, f"sat-offset-{seed}", seed, L=0.6, d=0.2))
     assert "input_saturation" in fams and ("offset" in fams or "output_offset" in fams)
