@@ -72,3 +72,21 @@ def test_saturation_and_offset_both_named(tmp_path, seed):
     the need for it was found (input saturation first, +45.5 % alone with the interval −58 % to +81 %)."""
     fams = _families(record(tmp_path, f"sat-offset-{seed}", seed, L=0.6, d=0.2))
     assert "input_saturation" in fams and ("offset" in fams or "output_offset" in fams)
+
+
+@pytest.mark.parametrize("seed", [2006, 2007])
+def test_quadratic_damping_and_friction_that_hide_each_other_are_both_named(tmp_path, seed):
+    """c_q·v|v| (c_q = 1) and F_c·sgn v (F_c = 0.15) in one record: the refitted linear damping absorbs
+    either term alone (on seed 2006 the estimation RMSE goes 0.0118 → 0.0116 with v|v|, → 0.0107 with
+    sgn v, → 0.0047 with both), so neither added-term test is significant and nothing is pending for
+    the look-ahead. The joint test of the pair (``pipeline.diagnostics.pairs``) starts it; both are named
+    with their values as estimated together, the first with the pair's evidence."""
+    d = _diagnosis(record(tmp_path, f"quaddamping-friction-{seed}", seed, cq=1.0, fc=0.15))
+    by = {f["family"]: f for f in d["findings"]}
+    assert {"quadratic_damping", "coulomb_friction"} <= set(by)
+    # the model's v' = (u - c*v - k*x)/m + coefficient*term, m = 1
+    assert -by["quadratic_damping"]["coefficient"] == pytest.approx(1.0, rel=0.2)
+    assert -by["coulomb_friction"]["coefficient"] == pytest.approx(0.15, rel=0.2)
+    first = d["findings"][0]
+    assert "gain_given" in first and first["gain_given"]["ci95"][0] > 0
+    assert any(e["test"].startswith("pair_wald[") and e["p_value"] < 0.01 for e in first["evidence"])
