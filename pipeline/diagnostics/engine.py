@@ -53,7 +53,7 @@ from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
 from .gain import gain_ci, unbounded_note
 from .state_probe import NAME as PROBE_NAME, probe_hypotheses
-from .pairs import Member, suppressed_pair
+from .pairs import Member, hidden_pairs
 from .why import LOOKED_AHEAD
 
 
@@ -1350,6 +1350,7 @@ class Diagnoser:
                  f"{100 * first.gain['relative']:+.1f} %, its interval not above 0)")
             return self._ahead_from(first, current, cands, it, tests_of)
         for first in self._pair_first(current, cands):
+            _log(f"  looking ahead from {first.hyp.key}")
             if first.fit is None:
                 first.fit = self.estimate(current, first)
                 if first.fit is None:
@@ -1393,16 +1394,13 @@ class Diagnoser:
         return first, first_fit, second, rnd
 
     def _pair_first(self, current: FitResult, cands: list[Candidate]) -> list[Candidate]:
-        """The look-ahead's starts when no extension is pending: two hypotheses of different families that
-        hide each other (:mod:`.pairs`: each alone is absorbed by the current parameters, together they
-        explain at least twice the sum of their shares, and their joint added-term test is significant
-        with Bonferroni over every hypothesis pair of the round), the pair's test added to their evidence;
-        empty when there is none. The member explaining less alone comes first: the current parameters
-        absorb it most, and with it in the model the other's test sees the pair's share (on the
-        quadratic damping + Coulomb friction record of seed 2006 the converse order left v|v| not
-        significant given sgn v); the look-ahead tries the other order when the first fails."""
+        """The look-ahead's starts when no extension is pending: a family's hypothesis a with which another
+        family's b explains at least twice its share alone, and b's added-term test given a significant
+        (:mod:`.pairs`, weighted Bonferroni over every ordered hypothesis pair of the round): the two
+        hide each other (quadratic damping and Coulomb friction under a refitted linear damping). Each
+        such a, smallest p first, with the pair's test added to its evidence; empty when there is none."""
         r = self._members
-        if r is None or r[0] is not current:
+        if r is None or r[0] is not current or current.jac is None:
             return []
         _, ctx, rows = r
         reps = {c.hyp.family: c for c in cands if not c.runner_up and c.wald is not None}
@@ -1417,18 +1415,18 @@ class Diagnoser:
                 continue
             chosen.append(c)
             members.append(Member(c.hyp.key, c.hyp.family, S, m))
-        pair = suppressed_pair((current.resid_est * self.w).ravel(), self._basis(current), members, self.alpha,
-                               lambda S: self.statistic(current, S))
-        if pair is None:
-            return []
-        a, b = (pair.a, pair.b) if pair.shares[0] <= pair.shares[1] else (pair.b, pair.a)
-        _log(f"  nothing accepted: {chosen[a].hyp.key} and {chosen[b].hyp.key} hide each other (joint p "
-             f"{_p_text(pair.p_value)}); looking ahead from each")
-        row = {"test": f"pair_wald[{chosen[a].hyp.key}+{chosen[b].hyp.key}]", "statistic": pair.wald.statistic,
-               "p_value": pair.p_value, "dof": pair.wald.dof, "detail": pair.detail(members)}
-        for k in (a, b):
-            chosen[k].evidence = chosen[k].evidence + [row]
-        return [chosen[a], chosen[b]]
+        starts: list[Candidate] = []
+        for pair in hidden_pairs((current.resid_est * self.w).ravel(), current.jac, self._basis(current),
+                                 members, self.alpha):
+            a, b = chosen[pair.a], chosen[pair.b]
+            if any(c is a for c in starts):
+                continue
+            _log(f"  nothing accepted, but {b.hyp.key} given {a.hyp.key} is significant (p {_p_text(pair.p_value)})")
+            a.evidence = a.evidence + [{
+                "test": f"pair_wald[{b.hyp.key}|{a.hyp.key}]", "statistic": pair.wald.statistic,
+                "p_value": pair.p_value, "dof": pair.wald.dof, "detail": pair.detail(members)}]
+            starts.append(a)
+        return starts
 
     def _run(self, model: Model, start: dict | None = None) -> Diagnosis:
         prob = self.prob
@@ -1685,9 +1683,10 @@ class Diagnoser:
                     "validation residual.")
             pair = next((e for e in c.evidence if e["test"].startswith("pair_wald[")), None)
             if pair is not None:
-                desc += (f" Its own added-term test was not significant: the parameters already in the model absorbed most of it. "
-                         f"The joint test with {w} was (p {_p_text(pair['p_value'])}, Bonferroni over the "
-                         "round's hypothesis pairs).")
+                other = pair["test"][len("pair_wald["):].split("|", 1)[0]
+                desc += (f" The look-ahead started from it because {other}'s added-term test given it was significant "
+                         f"(p {_p_text(pair['p_value'])}, Bonferroni over the round's ordered hypothesis pairs): "
+                         "the two hide each other.")
             f["gain_given"] = {"with": w, **gg, "lr_p_value": c.given["lr_p_value"]}
         f.update(description=desc, evidence=c.evidence, gain=g, delta_bic=c.delta_bic, delta_bic_eff=c.delta_bic_eff,
                  prior_penalty=c.prior_penalty,
