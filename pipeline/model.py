@@ -212,6 +212,22 @@ class Model:
         return out
 
 
+def switches(model: "Model") -> bool:
+    """Does a state equation of ``model`` (with its rewrites and terms written out) hold sign() of an
+    expression of a state: a right-hand side that jumps as the state crosses zero. Fixed-step RK4 across
+    such a switch gives a step whose result jumps when an intermediate stage's state changes sign, so the
+    simulated output is a discontinuous function of the parameters (jumps of about 1e-4 on a
+    mass–spring–damper with Coulomb friction), and finite differences need a step where the quotient is
+    stable (:func:`pipeline.fit.stable_jacobian`, ``engine.Diagnoser.sensitivity``)."""
+    states = set(model.states)
+    for text in model.describe_equations().values():
+        for node in ast.walk(ast.parse(text, mode="eval")):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "sign" and any(
+                    isinstance(n, ast.Name) and n.id in states for a in node.args for n in ast.walk(a)):
+                return True
+    return False
+
+
 def _wrap(text: str) -> str:
     node = parse_eval(text).body
     return text if isinstance(node, (ast.Name, ast.Constant, ast.Call)) or (

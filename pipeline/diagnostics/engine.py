@@ -27,7 +27,6 @@
 
 from __future__ import annotations
 
-import ast
 import math
 import os
 import sys
@@ -39,7 +38,7 @@ from threadpoolctl import threadpool_limits
 
 from .. import criteria
 from ..fit import FitResult, Problem, estimated_x0, fit_output_error, simulate_until, states_full
-from ..model import Model, rhs_vectorized, term_on
+from ..model import Model, rhs_vectorized, switches, term_on
 from ..simulate import outputs, simulate_states
 from . import stats
 from ..errors import InputError, SimulationError
@@ -308,18 +307,6 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
 def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
     """The Fisher-g row with the smallest p-value (one per output)."""
     return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
-
-
-def switches(model: Model) -> bool:
-    """Does a state equation of ``model`` (with its rewrites and terms written out) hold sign() of an
-    expression of a state: a right-hand side that jumps as the state crosses zero (:meth:`Diagnoser.sensitivity`)."""
-    states = set(model.states)
-    for text in model.describe_equations().values():
-        for node in ast.walk(ast.parse(text, mode="eval")):
-            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "sign" and any(
-                    isinstance(n, ast.Name) and n.id in states for a in node.args for n in ast.walk(a)):
-                return True
-    return False
 
 
 def _p_text(p: float) -> str:
