@@ -382,14 +382,15 @@ def at_bounds(fit: "FitResult") -> list[str]:
 STABLE_REL_STEP = 1e-4   # stable_jacobian's first relative step,
 STABLE_WIDEN = 10.0       # widened by this factor
 STABLE_TIMES = 3          # at most this many times (to 0.1 of the parameter's size)
-STABLE_TOL = 0.25         # until the column changes by less than this (relative norm)
+STABLE_TOL = 0.1          # until the column changes by less than this (relative norm)
 
 
 def stable_jacobian(resid, th: np.ndarray, deferred=None, ub: np.ndarray | None = None) -> np.ndarray:
     """Forward-difference Jacobian of ``resid`` at ``th`` for a rough simulation (:func:`model.switches`):
     each column's step starts at ``STABLE_REL_STEP``·max(|θ_i|, 0.01) and is widened ``STABLE_WIDEN``
     times while that changes the column by more than ``STABLE_TOL`` of its norm, at most
-    ``STABLE_TIMES`` times: the step is taken where the difference quotient is stable, the rule for
+    ``STABLE_TIMES`` times, and the narrower of the last two (the more accurate where both agree) is
+    kept: the step is taken where the difference quotient is stable, the rule for
     derivatives of noisy simulations (Moré & Wild 2011, SIAM J. Sci. Comput. 33(3)). The step is taken
     backwards where the forward one would cross the upper bound ``ub``. ``deferred``: the fit's
     thread-local flag that keeps these simulations out of a refit's budget."""
@@ -410,10 +411,9 @@ def stable_jacobian(resid, th: np.ndarray, deferred=None, ub: np.ndarray | None 
             for _ in range(STABLE_TIMES):
                 h *= STABLE_WIDEN
                 wider = col(h)
-                done = np.linalg.norm(c - wider) <= STABLE_TOL * np.linalg.norm(wider)
+                if np.linalg.norm(c - wider) <= STABLE_TOL * np.linalg.norm(wider):
+                    break            # stable: the narrower quotient is the more accurate one
                 c = wider
-                if done:
-                    break
             cols.append(c)
         return np.column_stack(cols) if cols else np.zeros((len(r0), 0))
     finally:

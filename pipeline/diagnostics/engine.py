@@ -484,7 +484,7 @@ class Diagnoser:
 
     ROUGH_WIDEN = 10.0     # a rough simulation's finite-difference step is widened by this factor,
     ROUGH_TIMES = 2        # at most this many times,
-    ROUGH_TOL = 0.25       # until the column changes by less than this (relative norm) when widened again
+    ROUGH_TOL = 0.1        # until the column changes by less than this (relative norm) when widened again
 
     def sensitivity(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> np.ndarray | None:
         """(n_est·ny, q) finite-difference output sensitivities (weighted) of the hypothesis'
@@ -533,11 +533,9 @@ class Diagnoser:
                 return None
             for _ in range(self.ROUGH_TIMES if rough else 0):
                 wider = column(c, h * self.ROUGH_WIDEN)
-                if wider is None:
-                    break
-                h, col, before = h * self.ROUGH_WIDEN, wider, col
-                if np.linalg.norm(before - col) <= self.ROUGH_TOL * np.linalg.norm(col):
-                    break
+                if wider is None or np.linalg.norm(col - wider) <= self.ROUGH_TOL * np.linalg.norm(wider):
+                    break        # stable: the narrower quotient is the more accurate one
+                h, col = h * self.ROUGH_WIDEN, wider
             cols.append(col)
         S = np.column_stack(cols)
         if not np.all(np.isfinite(S)) or not np.any(S):
