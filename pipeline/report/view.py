@@ -127,18 +127,27 @@ def first_screen(s: dict) -> dict:
                                          (f" on output {where}" if where else "")) + (f" ({term})" if term else "")
         partial = verdict == "unexplained_discrepancy"
         # with the verdict unexplained the findings explain part of the misfit only: not "the cause"
-        lines.append(f"{'Largest partial finding' if partial else 'Main cause'}: {cause}. Adding it lowers the validation RMSE by "
-                     f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
-                     f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
-                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} % for this validation input"
-                     + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
-                        if g.get("p_not_lower") is not None else "") + ").")
         gg = f0.get("gain_given")
-        if gg:      # accepted by the look-ahead: its own interval is not above 0, its gain given the other is
-            lines.append(f"Alone, its interval is not above 0: {gg.get('with')}'s misfit was still in the validation "
-                         f"residual. With {gg.get('with')} in the model too, it lowers the validation RMSE by "
+        head = f"{'Largest partial finding' if partial else 'Main cause'}: {cause}."
+        interval = (f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
+                    f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} %")
+        if gg:
+            # accepted by the look-ahead: its gain given the other first, its own gain (interval not above 0,
+            # point gain possibly negative) after it
+            rel = g.get("relative")
+            alone = ("–" if rel is None else
+                     f"{'lowers' if rel >= 0 else 'raises'} it by {sig(abs(100 * rel), 3)} %")
+            lines.append(f"{head} With {gg.get('with')} in the model too, adding it lowers the validation RMSE by "
                          f"{sig(100 * gg['relative'], 3)} % (95 % interval {sig(100 * gg['ci95'][0], 3)} to "
-                         f"{sig(100 * gg['ci95'][1], 3)} %).")
+                         f"{sig(100 * gg['ci95'][1], 3)} % for this validation input). Alone it {alone} (95 % "
+                         f"interval of the gain {interval}), an interval not above 0: {gg.get('with')}'s misfit "
+                         "was still in the validation residual.")
+        else:
+            lines.append(f"{head} Adding it lowers the validation RMSE by "
+                         f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
+                         f"{interval} for this validation input"
+                         + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
+                            if g.get("p_not_lower") is not None else "") + ").")
         if len(findings) > 1:
             lines.append(f"{plural(len(findings), 'partial finding' if partial else 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)

@@ -107,11 +107,15 @@ def test_first_screen_gives_a_look_ahead_finding_its_gain_given_the_other():
     f0["gain"] = {"relative": 0.49, "ci95": [-1.147, 0.879]}
     f0["gain_given"] = {"with": "dead_zone:u", "relative": 0.938, "ci95": [0.935, 0.940]}
     text = " ".join(view.first_screen(s)["lines"])
-    assert "49 % (95 % interval -115 to 87.9 %" in text
-    assert ("Alone, its interval is not above 0: dead_zone:u's misfit was still in the validation residual. "
-            "With dead_zone:u in the model too, it lowers the validation RMSE by 93.8 % (95 % interval 93.5 "
-            "to 94 %).") in text
+    assert ("With dead_zone:u in the model too, adding it lowers the validation RMSE by 93.8 % (95 % interval "
+            "93.5 to 94 % for this validation input). Alone it lowers it by 49 % (95 % interval of the gain -115 "
+            "to 87.9 %), an interval not above 0: dead_zone:u's misfit was still in the validation residual.") in text
     assert "Alone" not in " ".join(view.first_screen(_summary(62.39, 97.6))["lines"])
+    # alone, a look-ahead finding can make the validation error worse: said so, not "lowers by -7 %"
+    f0["gain"] = {"relative": -0.0712, "ci95": [-0.494, 0.232]}
+    text = " ".join(view.first_screen(s)["lines"])
+    assert "Alone it raises it by 7.12 % (95 % interval of the gain -49.4 to 23.2 %)" in text
+    assert "by -" not in text
 
 
 def test_negative_fit_and_unexplained_verdict_are_warned_plainly():
