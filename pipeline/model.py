@@ -218,14 +218,17 @@ def switches(model: "Model") -> bool:
     such a switch gives a step whose result jumps when an intermediate stage's state changes sign, so the
     simulated output is a discontinuous function of the parameters (jumps of about 1e-4 on a
     mass–spring–damper with Coulomb friction), and finite differences need a step where the quotient is
-    stable (:func:`pipeline.fit.stable_jacobian`, ``engine.Diagnoser.sensitivity``)."""
+    stable (:func:`pipeline.fit.stable_jacobian`, ``engine.Diagnoser.sensitivity``). Kept on the instance
+    (the model is immutable): every hypothesis' test of a round asks it of the same model."""
+    known = model.__dict__.get("_switches")
+    if known is not None:
+        return known
     states = set(model.states)
-    for text in model.describe_equations().values():
-        for node in ast.walk(ast.parse(text, mode="eval")):
-            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "sign" and any(
-                    isinstance(n, ast.Name) and n.id in states for a in node.args for n in ast.walk(a)):
-                return True
-    return False
+    found = any(isinstance(node, ast.Call) and getattr(node.func, "id", None) == "sign" and any(
+                    isinstance(n, ast.Name) and n.id in states for a in node.args for n in ast.walk(a))
+                for text in model.describe_equations().values() for node in ast.walk(ast.parse(text, mode="eval")))
+    object.__setattr__(model, "_switches", found)
+    return found
 
 
 def _wrap(text: str) -> str:
