@@ -338,7 +338,7 @@ class Diagnoser:
         # once its lazy screen has run
         self._round: tuple | None = None
         # the last candidates() round's (fit, context, [(representative, sensitivities, multiplicity)]),
-        # for the joint test of suppressed pairs (_pair_first)
+        # for the test of one hypothesis given another, for causes that hide each other (_pair_first)
         self._members: tuple | None = None
 
     def _sim_change(self, fit: FitResult, alt: Model) -> float | None:
@@ -1670,8 +1670,8 @@ class Diagnoser:
     def finding(self, c: Candidate, others: list[Candidate] | None = None) -> dict:
         h, fit = c.hyp, c.fit
         # accepted by the look-ahead: its parameters as estimated with the other extension in the model
-        # (alone, the current parameters may absorb it with the wrong sign: v·|v| at −0.16 beside a
-        # Coulomb friction, +0.96 with it)
+        # (alone, the current parameters absorb most of it: the coefficient of v·|v| was −0.16 without the
+        # Coulomb friction and −1.01 with it, the truth −1.0)
         est = c.given["fit"] if c.given is not None and c.given.get("fit") is not None else fit
         val = dict(zip(est.names, est.theta))
         sd = dict(zip(est.names, est.std))
