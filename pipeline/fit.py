@@ -379,19 +379,35 @@ def at_bounds(fit: "FitResult") -> list[str]:
     return out
 
 
-STABLE_REL_STEP = 1e-4   # stable_jacobian's first relative step,
-STABLE_WIDEN = 10.0       # widened by this factor
-STABLE_TIMES = 3          # at most this many times (to 0.1 of the parameter's size)
+STABLE_REL_STEP = 1e-4   # stable_jacobian's first relative step
+STABLE_WIDEN = 10.0       # a rough quotient's step is widened by this factor
+STABLE_TIMES = 3          # at most this many times (stable_jacobian: to 0.1 of the parameter's size)
 STABLE_TOL = 0.1          # until the column changes by less than this (relative norm)
 
 
+def stable_quotient(column, h: float, times: int = STABLE_TIMES):
+    """A difference-quotient column of a rough simulation (:func:`model.switches`): ``column(h)`` (None
+    when it cannot be simulated) is recomputed with the step widened ``STABLE_WIDEN`` times while that
+    changes it by more than ``STABLE_TOL`` of its norm, at most ``times`` times, and the narrower of the
+    last two (the more accurate where both agree) is kept: the step is taken where the quotient is
+    stable, the rule for derivatives of noisy simulations (Moré & Wild 2011, SIAM J. Sci. Comput. 33(3)).
+    Shared by the fit's Jacobian (:func:`stable_jacobian`) and the added-term tests' sensitivities
+    (``engine.Diagnoser.sensitivity``)."""
+    c = column(h)
+    if c is None:
+        return None
+    for _ in range(times):
+        h *= STABLE_WIDEN
+        wider = column(h)
+        if wider is None or np.linalg.norm(c - wider) <= STABLE_TOL * np.linalg.norm(wider):
+            break            # stable: the narrower quotient is the more accurate one
+        c = wider
+    return c
+
+
 def stable_jacobian(resid, th: np.ndarray, deferred=None, ub: np.ndarray | None = None) -> np.ndarray:
-    """Forward-difference Jacobian of ``resid`` at ``th`` for a rough simulation (:func:`model.switches`):
-    each column's step starts at ``STABLE_REL_STEP``·max(|θ_i|, 0.01) and is widened ``STABLE_WIDEN``
-    times while that changes the column by more than ``STABLE_TOL`` of its norm, at most
-    ``STABLE_TIMES`` times, and the narrower of the last two (the more accurate where both agree) is
-    kept: the step is taken where the difference quotient is stable, the rule for
-    derivatives of noisy simulations (Moré & Wild 2011, SIAM J. Sci. Comput. 33(3)). The step is taken
+    """Forward-difference Jacobian of ``resid`` at ``th`` for a rough simulation: each column by
+    :func:`stable_quotient` from the step ``STABLE_REL_STEP``·max(|θ_i|, 0.01). The step is taken
     backwards where the forward one would cross the upper bound ``ub``. ``deferred``: the fit's
     thread-local flag that keeps these simulations out of a refit's budget."""
     if deferred is not None:
@@ -406,15 +422,7 @@ def stable_jacobian(resid, th: np.ndarray, deferred=None, ub: np.ndarray | None 
                     h = -h
                 t[i] += h
                 return (np.asarray(resid(t), float) - r0) / h
-            h = STABLE_REL_STEP * max(abs(float(th[i])), 0.01)
-            c = col(h)
-            for _ in range(STABLE_TIMES):
-                h *= STABLE_WIDEN
-                wider = col(h)
-                if np.linalg.norm(c - wider) <= STABLE_TOL * np.linalg.norm(wider):
-                    break            # stable: the narrower quotient is the more accurate one
-                c = wider
-            cols.append(c)
+            cols.append(stable_quotient(col, STABLE_REL_STEP * max(abs(float(th[i])), 0.01)))
         return np.column_stack(cols) if cols else np.zeros((len(r0), 0))
     finally:
         if deferred is not None:

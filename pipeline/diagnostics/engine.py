@@ -37,7 +37,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import criteria
-from ..fit import FitResult, Problem, estimated_x0, fit_output_error, simulate_until, states_full
+from ..fit import (FitResult, Problem, estimated_x0, fit_output_error, simulate_until, stable_quotient,
+                   states_full)
 from ..model import Model, rhs_vectorized, switches, term_on
 from ..simulate import outputs, simulate_states
 from . import stats
@@ -482,9 +483,7 @@ class Diagnoser:
             self._basis_cache = cached = (fit, None if fit.jac is None else stats.column_basis(fit.jac))
         return cached[1]
 
-    ROUGH_WIDEN = 10.0     # a rough simulation's finite-difference step is widened by this factor,
-    ROUGH_TIMES = 2        # at most this many times,
-    ROUGH_TOL = 0.1        # until the column changes by less than this (relative norm) when widened again
+    ROUGH_TIMES = 2        # a rough simulation's test step is widened at most this many times (fit.stable_quotient)
 
     def sensitivity(self, fit: FitResult, hyp: Hypothesis, X: np.ndarray) -> np.ndarray | None:
         """(n_est·ny, q) finite-difference output sensitivities (weighted) of the hypothesis'
@@ -496,10 +495,9 @@ class Diagnoser:
         mass–spring–damper, 3 % of the residual's RMS). A forward difference then carries that jump over
         h: with h = 1e-5 the column of a 1.3 Hz disturbance force had an RMS of 17 and explained 0.2 % of a
         residual whose 1.3 Hz line holds 7 %; with h = 0.05 its RMS was 0.017 and it explained 7 %. For
-        such a current model each column is recomputed with the step widened ``ROUGH_WIDEN`` times while that
-        changes it by more than ``ROUGH_TOL`` (at most ``ROUGH_TIMES`` times): the step is chosen where
-        the difference quotient is stable, the usual rule for noisy simulations (Moré & Wild 2011, SIAM
-        J. Sci. Comput. 33(3), "Estimating derivatives of noisy simulations"). Not for a hypothesis that
+        such a current model each column is the stable quotient of :func:`pipeline.fit.stable_quotient`
+        (the step widened 10× while that changes it by more than 10 %, at most ``ROUGH_TIMES`` times;
+        Moré & Wild 2011, "Estimating derivatives of noisy simulations"). Not for a hypothesis that
         adds sign(v) to a smooth model: widened there, the friction column of the ball-and-beam record
         became a secant over a large step, and its p-value rose from 5e-5 to 2e-3."""
         m0 = self.hyp_model(fit, hyp)
@@ -527,15 +525,10 @@ class Diagnoser:
 
         cols = []
         for c in hyp.coefs:
-            h = self._step(fit, hyp, c, X)
-            col = column(c, h)
+            col = stable_quotient(lambda h: column(c, h), self._step(fit, hyp, c, X),
+                                  times=self.ROUGH_TIMES if rough else 0)
             if col is None:
                 return None
-            for _ in range(self.ROUGH_TIMES if rough else 0):
-                wider = column(c, h * self.ROUGH_WIDEN)
-                if wider is None or np.linalg.norm(col - wider) <= self.ROUGH_TOL * np.linalg.norm(wider):
-                    break        # stable: the narrower quotient is the more accurate one
-                h, col = h * self.ROUGH_WIDEN, wider
             cols.append(col)
         S = np.column_stack(cols)
         if not np.all(np.isfinite(S)) or not np.any(S):
