@@ -198,7 +198,7 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
                                                              "why": why_unexplained(diag.history)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
-            "alpha": lc.cfg.diagnose.alpha, "history": diag.history,
+            "alpha": lc.cfg.diagnose.alpha, "history": diag.history, "revisit": diag.revisit,
         },
         "models": models,
         "selected_model": name,

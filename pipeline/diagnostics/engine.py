@@ -55,6 +55,7 @@ from .noise import diagnose_noise
 from .gain import gain_ci, unbounded_note
 from .state_probe import NAME as PROBE_NAME, probe_hypotheses
 from .pairs import Member, hidden_pairs
+from .revisit import Link, revisit
 from .why import LOOKED_AHEAD
 
 
@@ -180,6 +181,7 @@ class Diagnosis:
     adequacy_nominal: list[stats.TestResult] = field(default_factory=list)
     verdict: str = "no_significant_discrepancy"
     where: dict | None = None                                            # where an unexplained misfit is
+    revisit: list[dict] = field(default_factory=list)   # moves of the backward step (:mod:`.revisit`)
 
 
 REFIT_SHARE = 0.2     # see Diagnoser._screen
@@ -1466,6 +1468,7 @@ class Diagnoser:
 
         tests0, f_cyc0 = tests_of(nominal)
         findings, history, fits = [], [], [nominal]
+        links: list[Link] = []                             # the forward pass, for the backward step
         steps: list[Accepted] = []                         # the accepted extensions, for the form test
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
@@ -1485,7 +1488,8 @@ class Diagnoser:
             # held input is a lag of about half a sample, which a fitted delay mimics within 1–2 BIC units)
             if inter is not None and (best is None or inter[1]["delta_bic"] < best.delta_bic + INTERSAMPLE_TIE_BIC):
                 findings.append(inter[1])
-                current = self._accepted(inter[0])
+                links.append(Link("intersample", current, self._accepted(inter[0])))
+                current = links[-1].after
                 fits.append(current)
                 switched = True
                 last_p = None
@@ -1501,6 +1505,7 @@ class Diagnoser:
                                                      and c.delta_bic_eff is not None]))
                 steps.append(Accepted(first.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
                                       first.lr.p_value, first.lr.statistic, current.sse_w, first.fit.sse_w))
+                links.append(Link("look-ahead", current, first_fit, first, self._alternatives(first, cands)))
                 current = first_fit
                 fits.append(current)
                 cands = rnd2.cands
@@ -1509,8 +1514,17 @@ class Diagnoser:
                                                 and c.delta_bic_eff is not None]))
             steps.append(Accepted(best.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
                                   best.lr.p_value, best.lr.statistic, current.sse_w, best.fit.sse_w))
-            current = self._accepted(best.fit)
+            links.append(Link("look-ahead" if done_until == it + 2 else "extension", current,
+                              self._accepted(best.fit), best, self._alternatives(best, cands)))
+            current = links[-1].after
             fits.append(current)
+            last_p = None
+        old = [l.after for l in links]
+        links, moves = revisit(self, links)
+        if moves:
+            findings, steps = self._revisited(links, old, findings, moves)
+            current = links[-1].after
+            fits = [nominal] + [l.after for l in links]
             last_p = None
         if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
             tests_f, f_cyc_f = tests_of(current)
@@ -1608,7 +1622,41 @@ class Diagnoser:
             tests0 = list(tests0) + [fb]
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
                          adequacy=adequacy, adequacy_nominal=nominal_adequacy,
-                         verdict=verdict, where=where)
+                         verdict=verdict, where=where, revisit=moves)
+
+    def _alternatives(self, c: Candidate, cands: list[Candidate]) -> list[Candidate]:
+        """The refitted candidates of ``c``'s round from other families within ``RUNNER_UP_DBIC`` of it: what
+        the backward step (:mod:`.revisit`) may put in its place."""
+        return [o for o in cands if o is not c and o.fit is not None and o.gain is not None
+                and o.delta_bic_eff is not None and c.delta_bic_eff is not None and o.hyp.family != c.hyp.family
+                and o.criterion - c.criterion <= self.RUNNER_UP_DBIC]
+
+    def _revisited(self, links: list[Link], old: list[FitResult], findings: list[dict],
+                   moves: list[dict]) -> tuple[list[dict], list[Accepted]]:
+        """The findings and the form test's steps of a chain the backward step changed (:mod:`.revisit`):
+        a link it kept keeps its finding (matched by its fit); a moved or refitted one gets a new finding
+        from its candidate, with the move in ``revisit`` and its evidence."""
+        out, steps = [], []
+        for link in links:
+            k = next((j for j, f in enumerate(old) if f is link.after), None)
+            if k is not None:
+                out.append(findings[k])
+            else:
+                f = self.finding(link.cand, [])
+                move = next((m for m in moves if m["replaced_by"] == link.cand.hyp.key), None)
+                if move is not None:
+                    f["revisit"] = move["detail"]
+                    f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
+                                                      "p_value": None, "detail": move["detail"]}]
+                else:
+                    f["revisit"] = ("refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")")
+                f["description"] += f" Backward step: {f['revisit']}."
+                out.append(f)
+            if link.cand is not None:          # an extension (look-ahead or not), not a switch
+                c = link.cand
+                steps.append(Accepted(c.hyp.family, out[-1].get("equation"), out[-1].get("term"), c.lr.p_value,
+                                      c.lr.statistic, link.before.sse_w, link.after.sse_w))
+        return out, steps
 
     TIE_CRITERION = 2.0   # criterion units within which the estimation part cannot separate two causes
     SEPARATION_MIN_GAIN = 0.01   # and the validation error by which the other must then be lower
@@ -1696,14 +1744,15 @@ class Diagnoser:
             f["selection"] = c.separation
         if c.given is not None:
             gg, w = c.given["gain"], c.given["with"]
+            their = "their " if ", " in w else f"{w}'s "
             desc = (f"{subject} (estimated with {w} in the model). With {w} in the model too, it lowers the "
                     f"validation free-run RMSE by {100 * gg['relative']:.1f} % (95 % CI {100 * gg['ci95'][0]:.1f} to "
                     f"{100 * gg['ci95'][1]:.1f} %; likelihood-ratio p {_p_text(c.given['lr_p_value'])}). Alone "
                     f"(refitted without {w}) it changes the validation free-run RMSE from {g['before']:.4g} to "
                     f"{g['after']:.4g} ({abs(100 * g['relative']):.1f} % {'lower' if g['relative'] >= 0 else 'higher'}; "
                     f"95 % CI of the gain {100 * g['ci95'][0]:+.1f} to "
-                    f"{100 * g['ci95'][1]:+.1f} %), an interval not above 0: {w}'s misfit was still in the "
-                    "validation residual.")
+                    f"{100 * g['ci95'][1]:+.1f} %)" + (f", an interval not above 0: {their}misfit was still in the "
+                                                        "validation residual." if g['ci95'][0] <= 0 else "."))
             pair = next((e for e in c.evidence if e["test"].startswith("pair_wald[")), None)
             if pair is not None:
                 other = pair["test"][len("pair_wald["):].split("|", 1)[0]

@@ -135,13 +135,15 @@ def first_screen(s: dict) -> dict:
             # accepted by the look-ahead: its gain given the other first, its own gain (interval not above 0,
             # point gain possibly negative) after it
             rel = g.get("relative")
+            their = "their " if ", " in str(gg.get("with")) else f"{gg.get('with')}'s "
             alone = ("–" if rel is None else
                      f"{'lowers' if rel >= 0 else 'raises'} it by {sig(abs(100 * rel), 3)} %")
             lines.append(f"{head} With {gg.get('with')} in the model too, adding it lowers the validation RMSE by "
                          f"{sig(100 * gg['relative'], 3)} % (95 % interval {sig(100 * gg['ci95'][0], 3)} to "
                          f"{sig(100 * gg['ci95'][1], 3)} % for this validation input). Alone it {alone} (95 % "
-                         f"interval of the gain {interval}), an interval not above 0: {gg.get('with')}'s misfit "
-                         "was still in the validation residual.")
+                         f"interval of the gain {interval})" + (
+                             "." if ci[0] is not None and ci[0] > 0 else
+                             f", an interval not above 0: {their}misfit was still in the validation residual."))
         else:
             lines.append(f"{head} Adding it lowers the validation RMSE by "
                          f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
