@@ -104,7 +104,10 @@ def reapply(model: Model, link: Link, values: dict[str, float]) -> Model | None:
     if new_names(hyp) & (set(model.params) | set(model.states)):
         return None
     vals = {k: float(values[k]) for k in new_names(hyp) if k in values}
-    return REGISTRY[hyp.family].extend(model, hyp, vals)
+    try:
+        return REGISTRY[hyp.family].extend(model, hyp, vals)
+    except _FAIL:          # an extension that does not fit this model (a name or state it needs is gone)
+        return None
 
 
 def at_values(model: Model, values: dict[str, float], keep: set[str]) -> Model:
