@@ -47,6 +47,14 @@ def bic(residuals: np.ndarray, p: int) -> float:
     return n * math.log(loss_det(residuals)) + n * LN2PI_P1 + p * math.log(n)
 
 
+def bic_effective_delta(delta_bic: float, dk: int, n: int, n_eff: float) -> float:
+    """A BIC difference restated with an effective sample size (Jones 2011, Statist. Med. 30(25),
+    "Bayesian information criterion for longitudinal and clustered data"): the likelihood part
+    ΔBIC − Δk ln N scaled by N_eff/N, the penalty Δk ln N_eff."""
+    like = delta_bic - dk * math.log(n)
+    return like * n_eff / n + dk * math.log(n_eff)
+
+
 def fpe(residuals: np.ndarray, p: int) -> float:
     n = np.asarray(residuals).shape[0]
     return loss_det(residuals) * (1 + p / n) / (1 - p / n)

@@ -145,8 +145,7 @@ def effective_bic(weighed: list[Candidate], current: FitResult) -> float | None:
     n_eff = max(stats.effective_n(n, stats.lag1(best.fit.resid_est))[1], 2.0)
     for c in weighed:
         dk = c.fit.n_params + len(c.hyp.searched) - current.n_params
-        like = c.delta_bic - dk * math.log(n)
-        c.delta_bic_eff = like * n_eff / n + dk * math.log(n_eff)
+        c.delta_bic_eff = criteria.bic_effective_delta(c.delta_bic, dk, n, n_eff)
     return n_eff
 
 
@@ -1467,9 +1466,8 @@ class Diagnoser:
             return memo[id(fit)][1]
 
         tests0, f_cyc0 = tests_of(nominal)
-        findings, history, fits = [], [], [nominal]
-        links: list[Link] = []                             # the forward pass, for the backward step
-        steps: list[Accepted] = []                         # the accepted extensions, for the form test
+        findings, history = [], []
+        links: list[Link] = []          # the forward pass: its fits, the form test's steps, the backward step
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
         last_r2: dict[str, float] = {}
@@ -1490,7 +1488,6 @@ class Diagnoser:
                 findings.append(inter[1])
                 links.append(Link("intersample", current, self._accepted(inter[0])))
                 current = links[-1].after
-                fits.append(current)
                 switched = True
                 last_p = None
                 continue
@@ -1503,29 +1500,27 @@ class Diagnoser:
                 history.append(rnd2.record(it + 1))
                 findings.append(self.finding(first, [c for c in cands if c is not first and c.gain is not None
                                                      and c.delta_bic_eff is not None]))
-                steps.append(Accepted(first.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
-                                      first.lr.p_value, first.lr.statistic, current.sse_w, first.fit.sse_w))
                 links.append(Link("look-ahead", current, first_fit, first, self._alternatives(first, cands)))
                 current = first_fit
-                fits.append(current)
                 cands = rnd2.cands
                 done_until = it + 2
             findings.append(self.finding(best, [c for c in cands if c is not best and c.gain is not None
                                                 and c.delta_bic_eff is not None]))
-            steps.append(Accepted(best.hyp.family, findings[-1].get("equation"), findings[-1].get("term"),
-                                  best.lr.p_value, best.lr.statistic, current.sse_w, best.fit.sse_w))
             links.append(Link("look-ahead" if done_until == it + 2 else "extension", current,
                               self._accepted(best.fit), best, self._alternatives(best, cands)))
             current = links[-1].after
-            fits.append(current)
             last_p = None
         old = [l.after for l in links]
         links, moves = revisit(self, links)
         if moves:
-            findings, steps = self._revisited(links, old, findings, moves)
+            findings = self._revisited(links, old, findings, moves)
             current = links[-1].after
-            fits = [nominal] + [l.after for l in links]
             last_p = None
+        fits = [nominal] + [l.after for l in links]
+        # the accepted extensions (look-ahead or not; not the intersample switch), for the form test
+        steps = [Accepted(l.cand.hyp.family, f.get("equation"), f.get("term"), l.cand.lr.p_value,
+                          l.cand.lr.statistic, l.before.sse_w, l.after.sse_w)
+                 for l, f in zip(links, findings) if l.cand is not None]
         if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
             tests_f, f_cyc_f = tests_of(current)
             cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
@@ -1632,11 +1627,11 @@ class Diagnoser:
                 and o.criterion - c.criterion <= self.RUNNER_UP_DBIC]
 
     def _revisited(self, links: list[Link], old: list[FitResult], findings: list[dict],
-                   moves: list[dict]) -> tuple[list[dict], list[Accepted]]:
-        """The findings and the form test's steps of a chain the backward step changed (:mod:`.revisit`):
-        a link it kept keeps its finding (matched by its fit); a moved or refitted one gets a new finding
-        from its candidate, with the move in ``revisit`` and its evidence."""
-        out, steps = [], []
+                   moves: list[dict]) -> list[dict]:
+        """The findings of a chain the backward step changed (:mod:`.revisit`): a link it kept keeps its
+        finding (matched by its fit); a moved or refitted one gets a new finding from its candidate, with
+        the move in ``revisit`` and its evidence."""
+        out = []
         for link in links:
             k = next((j for j, f in enumerate(old) if f is link.after), None)
             if k is not None:
@@ -1652,11 +1647,7 @@ class Diagnoser:
                     f["revisit"] = ("refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")")
                 f["description"] += f" Backward step: {f['revisit']}."
                 out.append(f)
-            if link.cand is not None:          # an extension (look-ahead or not), not a switch
-                c = link.cand
-                steps.append(Accepted(c.hyp.family, out[-1].get("equation"), out[-1].get("term"), c.lr.p_value,
-                                      c.lr.statistic, link.before.sse_w, link.after.sse_w))
-        return out, steps
+        return out
 
     TIE_CRITERION = 2.0   # criterion units within which the estimation part cannot separate two causes
     SEPARATION_MIN_GAIN = 0.01   # and the validation error by which the other must then be lower

@@ -39,11 +39,11 @@ refit an intersample switch after the moved finding is not made.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..criteria import bic_effective_delta as bic_eff
 from ..errors import InputError, SimulationError
 from ..fit import FitResult, estimated_x0, fit_output_error
 from ..model import Model
@@ -65,13 +65,6 @@ class Link:
     after: FitResult
     cand: object | None = None
     alts: list = field(default_factory=list)
-
-
-def bic_eff(delta_bic: float, dk: int, n: int, n_eff: float) -> float:
-    """ΔBIC with the effective sample size (:func:`engine.effective_bic`, Jones 2011): the likelihood
-    part scaled by N_eff/N and the penalty Δk·ln N_eff."""
-    like = delta_bic - dk * math.log(n)
-    return like * n_eff / n + dk * math.log(n_eff)
 
 
 def gap(final: FitResult, alt: FitResult, searched_final: int, searched_alt: int, prior_gap: float) -> float:
