@@ -1159,8 +1159,23 @@ class Diagnoser:
         if best is None:
             return nominal, None, hist
         chosen, f, dbic, g = best
-        key, subject = fam.describe_choice(nominal.model, chosen)
-        runners, same = self._intersample_equivalent(nominal, chosen, f, dbic, g, before, bic0)
+        return f, self.switch_finding(nominal, chosen, f, dbic, g, passed), hist
+
+    def switch_gain(self, base: FitResult, f: FitResult, rng) -> tuple[dict, float]:
+        """An intersample switch's validation gain over ``base`` (one-sided, as the stage tests it) and
+        its estimation ΔBIC (:meth:`_intersample`)."""
+        before = gain_resid(base, self.prob)
+        g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot, one_sided=True), before.shape[1])
+        return g, bic_of(f) - bic_of(base)
+
+    def switch_finding(self, base: FitResult, chosen: str, f: FitResult, dbic: float, g: dict,
+                       passed: list | tuple = ()) -> dict:
+        """The finding of a switch from ``base``'s intersample to ``chosen`` (fit ``f``; its gain ``g`` and
+        ΔBIC over ``base``): the sentence, the twin runner-up (:meth:`_intersample_equivalent`) and the
+        other accepted choices within ``TIE_CRITERION`` (``passed``: (choice, fit, ΔBIC, gain) rows)."""
+        before, bic0 = gain_resid(base, self.prob), bic_of(base)
+        key, subject = REGISTRY["intersample"].describe_choice(base.model, chosen)
+        runners, same = self._intersample_equivalent(base, chosen, f, dbic, g, before, bic0)
         # another accepted choice within TIE_CRITERION BIC units: the estimation part does not separate them
         # (a multisine through a slow plant: foh and the band-limited signal 0.6 BIC units apart)
         tied = [(c2, g2, d2) for c2, _, d2, g2 in passed if c2 != chosen and d2 - dbic < self.TIE_CRITERION]
@@ -1178,7 +1193,7 @@ class Diagnoser:
                        {"test": "held_out_gain", "statistic": g["relative"], "p_value": None, "ci95": g["ci95"]}],
                    "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations(),
                    "runners_up": runners}
-        return f, finding, hist
+        return finding
 
     def _intersample_equivalent(self, nominal: FitResult, chosen: str, f: FitResult, dbic: float, g: dict,
                                 before: np.ndarray, bic0: float) -> tuple[list[dict], str]:
@@ -1636,6 +1651,17 @@ class Diagnoser:
             k = next((j for j, f in enumerate(old) if f is link.after), None)
             if k is not None:
                 out.append(findings[k])
+            elif link.cand is None:         # a switch the backward step put in (revisit.to_switch)
+                chosen = link.after.model.intersample
+                g, dbic = self.switch_gain(link.before, link.after, np.random.default_rng([self.seed, 7400]))
+                f = self.switch_finding(link.before, chosen, link.after, dbic, g)
+                move = next(m for m in moves if m["replaced_by"] == f"intersample:{chosen}")
+                f["revisit"] = move["detail"]
+                f["gain_given"] = move["gain_given"]
+                f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
+                                                  "p_value": None, "detail": move["detail"]}]
+                f["description"] += f" Backward step: {f['revisit']}."
+                out.append(f)
             else:
                 f = self.finding(link.cand, [])
                 move = next((m for m in moves if m["replaced_by"] == link.cand.hyp.key), None)

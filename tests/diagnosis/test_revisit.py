@@ -74,8 +74,8 @@ def test_a_half_sample_switch_is_dropped_once_the_delay_is_found(tmp_path, seed,
     assert drop["finding"] == "intersample:zoh"
 
 
-def _held_record(folder: Path, seed: int, k3: float, n: int = 4000) -> Path:
-    """A mass–spring–damper x'' = u − 0.6 x' − 4 x − k3 x³ whose input is *held* over each sample (the
+def _held_record(folder: Path, seed: int, k3: float, n: int = 4000, d: float = 0.0) -> Path:
+    """A mass–spring–damper x'' = u + d − 0.6 x' − 4 x − k3 x³ whose input is *held* over each sample (the
     same eight-sine signal as ``two_causes``, sampled and held), integrated interval by interval by
     ``solve_ivp`` (exact zoh), 2 % white noise; the config says foh."""
     rng = np.random.default_rng(seed)
@@ -84,7 +84,7 @@ def _held_record(folder: Path, seed: int, k3: float, n: int = 4000) -> Path:
     u = np.sum(a * np.sin(2 * np.pi * f * t[:, None] + ph), axis=1) / 2
     z, xs = np.zeros(2), [0.0]
     for k in range(n - 1):
-        sol = solve_ivp(lambda s, z, uk=u[k]: [z[1], uk - 0.6 * z[1] - 4 * z[0] - k3 * z[0] ** 3], (0, DT), z,
+        sol = solve_ivp(lambda s, z, uk=u[k]: [z[1], uk + d - 0.6 * z[1] - 4 * z[0] - k3 * z[0] ** 3], (0, DT), z,
                         rtol=1e-10, atol=1e-12)
         z = sol.y[:, -1]
         xs.append(z[0])
@@ -112,6 +112,43 @@ def test_a_real_switch_to_zoh_is_kept_after_a_later_finding(tmp_path):
     assert fams[:2] == ["intersample", "cubic_stiffness"]
     assert d["findings"][0]["chosen"] == "zoh"
     assert not d["revisit"]
+
+
+@pytest.mark.parametrize("seed,stand_in", [(1, "unmodeled_dynamics"), (11, "input_delay")])
+def test_a_sub_sample_lag_or_delay_standing_in_for_a_held_input_becomes_the_switch(tmp_path, seed, stand_in):
+    """Held input, configured foh, with a force offset d = 0.02 and a weak spring k3 = 0.1. The forward
+    pass named the offset, then a sub-sample stand-in for the hold (seed 1: a first-order lag of 0.6
+    samples; seed 11: a dead time of about half a sample), then a spring term: in the stand-in's round the
+    spring's misfit was still in the residual and the zoh switch lost to it by more than the 10 BIC units
+    the intersample choice is given. With the spring in the model zoh fits the estimation part about as
+    well with one parameter fewer and passes the switch's own rule against foh, so it takes the
+    stand-in's place (``revisit.to_switch``)."""
+    d = _diagnosis(_held_record(tmp_path / "held", seed, k3=0.1, d=0.02))
+    fams = [f["family"] for f in d["findings"]]
+    assert not {"unmodeled_dynamics", "input_delay"} & set(fams)
+    switch = next(f for f in d["findings"] if f["family"] == "intersample")
+    assert switch["chosen"] == "zoh" and switch["configured"] == "foh"
+    assert switch["gain_given"]["ci95"][0] > 0 and "in place of" in switch["revisit"]
+    move = next(m for m in d["revisit"] if m["replaced_by_family"] == "intersample")
+    assert move["move"] == "swap" and move["family"] == stand_in and move["criterion_change"] < -2.0
+    assert any(f in fams for f in ("offset", "output_offset"))
+    if seed == 1:
+        cubic = next(f for f in d["findings"] if f["family"] == "cubic_stiffness")
+        assert -cubic["coefficient"] == pytest.approx(0.1, rel=0.2)
+
+
+def test_a_real_sub_sample_delay_before_a_later_finding_is_not_taken_for_a_hold(tmp_path):
+    """The other side: a smooth input (configured foh, rightly) through a dead time of one sample
+    (0.02 s) and a spring k3 = 0.5 (``two_causes.record``, seed 2005). The delay is found before the
+    spring and is under one sample, so the backward step weighs the zoh switch in its place: zoh is half
+    a sample and cannot fit as well, so the delay stays."""
+    d = _diagnosis(record(tmp_path, "delay-one-sample", 2005, tau=0.02, k3=0.5))
+    fams = [f["family"] for f in d["findings"]]
+    assert "intersample" not in fams and "input_delay" in fams
+    assert fams.index("input_delay") < len(fams) - 1          # not the last finding: it was revisited
+    delay = next(f for f in d["findings"] if f["family"] == "input_delay")
+    assert delay["delay_s"] <= DT and abs(delay["delay_s"] - 0.02) <= 0.25 * DT
+    assert not any(m["replaced_by_family"] == "intersample" for m in d["revisit"])
 
 
 def test_effective_bic_difference_in_closed_form():

@@ -158,6 +158,13 @@ class Family:
         extension is simulated to the end."""
         return None
 
+    def mimics_hold(self, hyp: Hypothesis, model: Model, dt: float) -> bool:
+        """Whether this extension, as fitted in ``model``, could be a wrong intersample assumption in
+        disguise (a held input simulated as foh lags it by about half a sample,
+        ``Intersample.equivalent``): the backward step (:func:`.revisit.to_switch`) then weighs the
+        switch in its place. Default: no."""
+        return False
+
     def describe(self, hyp: Hypothesis, fit, val: dict, sd: dict) -> tuple[dict, str]:
         """Key parameters (contract §2 names) and the subject of the finding's sentence."""
         c0 = hyp.coefs[0]

@@ -47,6 +47,11 @@ class InputDelay(Family):
     def extend(self, model, hyp, values=None):
         return self._delayed(model, hyp, (values or {}).get(hyp.coefs[0], 0.0))
 
+    def mimics_hold(self, hyp, model, dt):
+        """A dead time of at most one sample on every input: a held input simulated as foh lags by half
+        a sample (``Intersample.equivalent``)."""
+        return not hyp.input and float(model.params.get(hyp.coefs[0], np.inf)) <= dt
+
     def step(self, dg) -> float:
         return 0.5 * dg.dt
 

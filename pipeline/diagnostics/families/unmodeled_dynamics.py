@@ -37,6 +37,12 @@ class UnmodeledDynamics(Family):
                             input_rewrites=(Rewrite(self.id, u, ua),),
                             extra_states={ua: (f"({u} - {ua})/{tau}", hyp.info["x0"])})
 
+    def mimics_hold(self, hyp, model, dt):
+        """A lag of at most one sample on the only input: at frequencies well below the sampling rate a
+        lag τ is a dead time τ, and a held input simulated as foh lags by half a sample
+        (``Intersample.equivalent``); the switch shifts every input, so not with several."""
+        return len(model.inputs) == 1 and float(model.params.get(hyp.info["tau_name"], float("inf"))) <= dt
+
     def describe(self, hyp, fit, val, sd):
         tau = hyp.info["tau_name"]
         tv = float(fit.model.params[tau])
