@@ -128,7 +128,9 @@ def first_screen(s: dict) -> dict:
         partial = verdict == "unexplained_discrepancy"
         # with the verdict unexplained the findings explain part of the misfit only: not "the cause"
         gg = f0.get("gain_given")
-        head = f"{'Largest partial finding' if partial else 'Main cause'}: {cause}."
+        tied = ", ".join(str(t.get("hypothesis")) for t in f0.get("tied_with") or [])
+        head = (f"{'Largest partial finding' if partial else 'Main cause'}: {cause}"
+                + (f", or {tied}: these data cannot tell them apart." if tied else "."))
         interval = (f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} %")
         if gg:
