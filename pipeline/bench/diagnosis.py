@@ -305,6 +305,12 @@ def _pct(k: int, n: int) -> str:
     return "–" if n == 0 else f"{100.0 * k / n:.0f} % ({k}/{n})"
 
 
+def _tied_with_truth(r: dict) -> bool:
+    """The record's first finding states a tie (``tied_with``) with the hidden family."""
+    f = (r.get("findings") or [{}])[0]
+    return any(t.get("family") == r["truth"]["family"] for t in f.get("tied_with") or [])
+
+
 def summarise(results: list[dict]) -> dict:
     ok = [r for r in results if "truth" in r]
     eff = [r for r in ok if r["truth"]["kind"] == "effect"]
@@ -326,6 +332,10 @@ def summarise(results: list[dict]) -> dict:
         "top1": {f: {str(k): v for k, v in d.items()} for f, d in top1.items()},
         "top1_all": {str(nz): [sum(r.get("label") == r["truth"]["family"] for r in eff if r["spec"]["noise"] == nz),
                                sum(1 for r in eff if r["spec"]["noise"] == nz)] for nz in NOISE_LEVELS},
+        # a miss whose first finding says that the record cannot tell it from the hidden family (tied_with)
+        "top1_miss_stated_tie": {str(nz): [sum(_tied_with_truth(r) for r in miss), len(miss)] for nz in NOISE_LEVELS
+                                 for miss in [[r for r in eff if r["spec"]["noise"] == nz
+                                               and r.get("label") != r["truth"]["family"]]]},
         "null_physical_false_alarms": [sum(r["null"]["physical_false_alarm"] for r in nul_ok), len(nul)],
         "null_any_false_alarms": [sum(r["null"]["any_false_alarm"] for r in nul_ok), len(nul)],
         "null_unexplained": [sum(r.get("verdict") == "unexplained_discrepancy" for r in nul), len(nul)],
@@ -360,6 +370,10 @@ def render(results: list[dict], meta: dict) -> str:
         k, n = s["top1_all"][str(nz)]
         L.append(f"| top-1 over all families, {100 * nz:.0f} % noise | {_pct(k, n)} | "
                  f"{'≥ 95 %' if nz == 0.02 else '≥ 85 %'} |")
+    for nz in NOISE_LEVELS:
+        k, n = s.get("top1_miss_stated_tie", {}).get(str(nz), [0, 0])
+        L.append(f"| top-1 misses at {100 * nz:.0f} % noise whose finding states a tie with the hidden family "
+                 f"(`tied_with`) | {_pct(k, n)} | – |")
     k, n = s["null_physical_false_alarms"]
     L.append(f"| null records with a physical finding (false alarm) | {_pct(k, n)} | ≤ 2 % |")
     k, n = s["null_any_false_alarms"]

@@ -103,6 +103,20 @@ def test_one_record_is_diagnosed_and_an_input_error_is_counted(tmp_path, monkeyp
     assert s["status"] == {"input_error": 1}
 
 
+def test_a_miss_is_counted_as_a_stated_tie_only_when_its_finding_names_the_hidden_family():
+    def rec(truth, first, tied, noise=0.1):
+        return {"truth": {"kind": "effect", "family": truth, "accept": [truth]}, "spec": {"noise": noise},
+                "status": "ok", "label": first, "verdict": "discrepancy", "seconds_generate": 0.1,
+                "seconds_analyse": 1.0,
+                "findings": [{"family": first, "tied_with": [{"family": f} for f in tied]}]}
+    s = bd.summarise([rec("input_delay", "unmodeled_dynamics", ["input_delay"]),      # a stated tie
+                      rec("input_delay", "unmodeled_dynamics", ["offset"]),           # a tie, not with the truth
+                      rec("input_delay", "intersample", []),                          # a plain miss
+                      rec("input_delay", "input_delay", ["unmodeled_dynamics"]),      # right: not a miss
+                      rec("offset", "output_offset", ["offset"], noise=0.02)])
+    assert s["top1_miss_stated_tie"] == {"0.02": [1, 1], "0.1": [1, 3]}
+
+
 @pytest.mark.parametrize("args, says", [(["--only", "offset,frobnication"], "--only: unknown frobnication"),
                                         (["--noise", "0.05"], "--noise: 0.05 is not a level of the grid"),
                                         (["--bases", "msd,rocket"], "--bases: unknown rocket"),
