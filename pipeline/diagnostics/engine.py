@@ -1655,11 +1655,14 @@ class Diagnoser:
                 chosen = link.after.model.intersample
                 g, dbic = self.switch_gain(link.before, link.after, np.random.default_rng([self.seed, 7400]))
                 f = self.switch_finding(link.before, chosen, link.after, dbic, g)
-                move = next(m for m in moves if m["replaced_by"] == f"intersample:{chosen}")
-                f["revisit"] = move["detail"]
-                f["gain_given"] = move["gain_given"]
-                f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
-                                                  "p_value": None, "detail": move["detail"]}]
+                move = next((m for m in moves if m["replaced_by"] == f"intersample:{chosen}"), None)
+                if move is not None:
+                    f["revisit"] = move["detail"]
+                    f["gain_given"] = move["gain_given"]
+                    f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
+                                                      "p_value": None, "detail": move["detail"]}]
+                else:
+                    f["revisit"] = "refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")"
                 f["description"] += f" Backward step: {f['revisit']}."
                 out.append(f)
             else:
