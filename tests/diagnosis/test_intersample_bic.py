@@ -68,7 +68,7 @@ def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
 # A wrong foh on a held (PRBS) input is a lag of about half a sample: a fitted input delay or a one-step
 # input lag mimics it within 1–2 BIC units at the price of a parameter. The physical cause is preferred
 # only when its BIC beats the intersample choice by engine.INTERSAMPLE_TIE_BIC (10, Kass & Raftery's
-# "very strong"). Records from the independent bench (solve_ivp on the held input, the config says foh);
+# "very strong"), both with the round's effective sample size (Diagnoser.inter_wins). Records from the independent bench (solve_ivp on the held input, the config says foh);
 # before the margin these were named input_delay (seed 1002) and unmodeled_dynamics (seed 1008).
 @pytest.mark.parametrize("seed,magnitude", [(1002, "medium"), (1008, "small"), (1008, "medium")])
 def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, magnitude):
@@ -83,9 +83,30 @@ def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, ma
     # the delay was refitted and accepted as well: it lost on the margin, not on its own test
     cands = {c["hypothesis"]: c for c in ctx.diag.history[0]["candidates"]}
     rival = [c for k, c in cands.items() if k.startswith(("input_delay", "unmodeled_dynamics")) and c.get("accepted")]
-    assert rival and all(c["delta_bic"] > first["delta_bic"] - engine.INTERSAMPLE_TIE_BIC for c in rival)
+    assert rival and all(c["delta_bic_eff"] > first["delta_bic_eff"] - engine.INTERSAMPLE_TIE_BIC for c in rival)
     # and the finding says so: the configured foh with half a sample more dead time is its runner-up, and
     # the description says that these data cannot tell the two apart
     twin = [r for r in first["runners_up"] if r["family"] == "input_delay"]
     assert len(twin) == 1 and abs(twin[0]["gain"]["relative"] - first["gain"]["relative"]) < 0.01
     assert "cannot tell a held input from a half-sample dead time" in first["description"]
+
+
+def test_the_switch_and_a_lag_are_compared_with_the_effective_sample_size(tmp_path):
+    """Test seed 1000 of the independent bench: a held input configured as foh, through the tank, 2 %
+    AR(0.9) noise. A first-order lag of 0.7 samples fits the estimation part 34 raw BIC units better than
+    the switch to zoh, but raw differences on this residual are about 19 times too large: with the
+    effective sample size the lag is 1.7 units ahead, inside the 10 the switch is allowed, and the switch
+    also has the larger validation gain. It was named the lag before."""
+    case = make_case("intersample", "tank", 1000, magnitude="small", noise=0.02, colour="ar0.9",
+                     input_kind="held", n=2000, out_dir=tmp_path)
+    assert case.truth["params"]["configured"] == "foh" and case.truth["params"]["chosen"] == "zoh"
+    with contextlib.redirect_stderr(io.StringIO()):
+        ctx = analyse(load_config(Path(case.dir) / "config.yaml"))
+    first = ctx.summary["diagnosis"]["findings"][0]
+    assert first["family"] == "intersample" and first["chosen"] == "zoh"
+    cands = {c["hypothesis"]: c for c in ctx.diag.history[0]["candidates"]}
+    lag = next(c for k, c in cands.items() if k.startswith("unmodeled_dynamics") and c.get("accepted"))
+    # by raw ΔBIC the lag would have been chosen; with the effective sample size it is within the margin
+    assert lag["delta_bic"] < first["delta_bic"] - engine.INTERSAMPLE_TIE_BIC
+    assert lag["delta_bic_eff"] > first["delta_bic_eff"] - engine.INTERSAMPLE_TIE_BIC
+    assert lag["gain"]["relative"] < first["gain"]["relative"]
