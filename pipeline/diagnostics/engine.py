@@ -188,8 +188,8 @@ REFIT_SHARE = 0.2     # see Diagnoser._screen
 REFIT_BUDGET_ITERATIONS = 4   # a refit still above the current error after ~4 iterations is abandoned
 COLOUR_TESTS = ("autocorrelation", "ljung_box", "fisher_g")   # residual tests of colour, not of structure
 # BIC units (with the round's effective sample size: Diagnoser.inter_wins) by which a physical cause must
-# beat the intersample choice (which adds no parameter) to be preferred: 10 is where Kass & Raftery (1995, JASA 90, §3.2) put "very strong" evidence on the 2 ln B
-# scale that a BIC difference approximates
+# beat the intersample choice (which adds no parameter) to be preferred: 10 is where Kass & Raftery
+# (1995, JASA 90, §3.2) put "very strong" evidence on the 2 ln B scale that a BIC difference approximates
 INTERSAMPLE_TIE_BIC = 10.0
 # the validation gain an intersample switch must reach to be named: the same 0.1 % of the residual RMS
 # below which a finer step is not even refitted (Diagnoser._intersample). Without it a finer RK4 step was

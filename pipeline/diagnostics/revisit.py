@@ -241,8 +241,9 @@ def switch_rule(dg, final: FitResult, conf: Model, key: int) -> SwitchRule | Non
     """The rule a switch was accepted by (:meth:`engine.Diagnoser._intersample`: ΔBIC below −2, a
     validation gain of at least 0.1 % and lower at the one-sided 5 % level), applied to ``final``
     against ``final``'s model with ``conf``'s intersample and step, refitted; None when that refit
-    fails. ``key`` seeds the gain's bootstrap: the same for the same link, so that the switch that
-    :func:`to_switch` puts in and :func:`drop_switch` then re-examines get the same answer."""
+    fails. The gain's interval is analytic (:func:`gain.gain_ci`; ``key`` only seeds the generator its
+    signature takes), so the switch that :func:`to_switch` puts in gets the same answer when
+    :func:`drop_switch` re-examines it in the same final model."""
     from .engine import INTERSAMPLE_MAX_DBIC, INTERSAMPLE_MIN_GAIN, ONE_SIDED_LEVEL
     m = replace(final.model, intersample=conf.intersample, substeps=conf.substeps)
     try:
