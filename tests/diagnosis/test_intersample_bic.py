@@ -110,3 +110,24 @@ def test_the_switch_and_a_lag_are_compared_with_the_effective_sample_size(tmp_pa
     assert lag["delta_bic"] < first["delta_bic"] - engine.INTERSAMPLE_TIE_BIC
     assert lag["delta_bic_eff"] > first["delta_bic_eff"] - engine.INTERSAMPLE_TIE_BIC
     assert lag["gain"]["relative"] < first["gain"]["relative"]
+
+
+def test_a_dead_time_the_validation_part_prefers_is_not_given_to_the_switch(tmp_path):
+    """The other side (test seed 1001): a 3.6-sample dead time through the tank, a smooth input rightly
+    configured as foh, 10 % AR(0.9) noise. A switch to zoh explains half a sample of the delay: 150 raw
+    BIC units behind it, only 3.2 effective units. The validation part separates them (the delay's gain
+    22 %, the switch's 5.7 %), so the delay is named."""
+    case = make_case("input_delay", "tank", 1001, magnitude="medium", noise=0.1, colour="ar0.9",
+                     input_kind="band", n=2000, out_dir=tmp_path)
+    with contextlib.redirect_stderr(io.StringIO()):
+        ctx = analyse(load_config(Path(case.dir) / "config.yaml"))
+    d = ctx.summary["diagnosis"]
+    assert d["findings"][0]["family"] == "input_delay"
+    assert "intersample" not in [f["family"] for f in d["findings"]]
+    rows = {c["hypothesis"]: c for c in ctx.diag.history[0]["candidates"]}
+    switch, delay = rows["zoh"], rows["input_delay"]
+    assert switch["accepted"] and delay["accepted"]
+    # the raw margin alone would name the delay; the effective one would not (a switch's ΔBIC_eff is its
+    # raw ΔBIC scaled by N_eff/N, the delay's with its parameter's ln N_eff): the validation part decides
+    assert delay["delta_bic"] < switch["delta_bic"] - engine.INTERSAMPLE_TIE_BIC
+    assert delay["gain"]["relative"] > switch["gain"]["relative"] + 0.1
