@@ -1101,7 +1101,6 @@ class Diagnoser:
         the independent bench (tests/diagnosis/test_intersample_one_sided.py): at 10 % noise a correct
         switch gains about 2 % of the validation RMSE, and its two-sided interval reached just below 0."""
         fam = REGISTRY["intersample"]
-        before, bic0 = gain_resid(nominal, self.prob), bic_of(nominal)
         rows, best, passed = [], None, []
         for chosen, alt in fam.alternatives(nominal.model):
             if chosen in self._intersample_dropped:
@@ -1119,9 +1118,7 @@ class Diagnoser:
                 rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
                              "reason": f"refit failed: {exc}"})
                 continue
-            g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot, one_sided=True),
-                        before.shape[1])
-            dbic = bic_of(f) - bic0
+            g, dbic = self.switch_gain(nominal, f, rng)
             lr = lr_against(nominal, f, self.alpha)
             # no parameter is added (q = 0): the likelihood-ratio row only says that the weighted SSE fell;
             # the estimation-part criterion for equal parameter counts is ΔBIC < 0, the same BIC (log det
@@ -1664,7 +1661,7 @@ class Diagnoser:
         if d_eff >= best_eff + INTERSAMPLE_TIE_BIC or best.fit is None:
             return False
         g = gain_ci(gain_resid(f_is, self.prob), gain_resid(best.fit, self.prob))   # 1 − RMSE_cause/RMSE_switch
-        return not (g["ci95"][0] > 0 and g["relative"] >= self.SEPARATION_MIN_GAIN)
+        return not separates(g, self.SEPARATION_MIN_GAIN)
 
     def _alternatives(self, c: Candidate, cands: list[Candidate]) -> list[Candidate]:
         """The refitted candidates of ``c``'s round from other families within ``RUNNER_UP_DBIC`` of it: what
@@ -1744,7 +1741,7 @@ class Diagnoser:
         better = []
         for c in ties:
             g = gain_ci(base, gain_resid(c.fit, self.prob))
-            if g["ci95"][0] > 0 and g["relative"] >= self.SEPARATION_MIN_GAIN:
+            if separates(g, self.SEPARATION_MIN_GAIN):
                 better.append((g["relative"], c, g))
         if not better:
             return best
@@ -1772,9 +1769,9 @@ class Diagnoser:
             if (not o.accepted or o.fit is None or o.gain is None or o.hyp.family == c.hyp.family
                     or abs(o.criterion - c.criterion) >= self.TIE_CRITERION):
                 continue
-            g = gain_ci(mine, gain_resid(o.fit, self.prob))        # 1 − RMSE_o / RMSE_c
-            h = gain_ci(gain_resid(o.fit, self.prob), mine)        # 1 − RMSE_c / RMSE_o
-            if any(x["ci95"][0] > 0 and x["relative"] >= self.SEPARATION_MIN_GAIN for x in (g, h)):
+            theirs = gain_resid(o.fit, self.prob)
+            g = gain_ci(mine, theirs)        # 1 − RMSE_o / RMSE_c
+            if separates(g, self.SEPARATION_MIN_GAIN) or separates(gain_ci(theirs, mine), self.SEPARATION_MIN_GAIN):
                 continue
             out.append(_tie_row(o, o.criterion - c.criterion, g))
         return out
@@ -1848,6 +1845,13 @@ class Diagnoser:
                  prior_penalty=c.prior_penalty,
                  extended_equations=fit.model.describe_equations(), runners_up=runners)
         return f
+
+
+def separates(g: dict, min_gain: float) -> bool:
+    """The validation part clearly prefers the "after" model of gain ``g`` (:func:`gain_ci`): the 95 %
+    interval of the relative gain above 0 and the gain at least ``min_gain`` (:meth:`Diagnoser.separate`,
+    whose rule the intersample margin and the stated ties use too)."""
+    return g["ci95"][0] > 0 and g["relative"] >= min_gain
 
 
 def _tie_row(o, gap: float, g: dict) -> dict:

@@ -68,8 +68,8 @@ def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
 # A wrong foh on a held (PRBS) input is a lag of about half a sample: a fitted input delay or a one-step
 # input lag mimics it within 1–2 BIC units at the price of a parameter. The physical cause is preferred
 # only when its BIC beats the intersample choice by engine.INTERSAMPLE_TIE_BIC (10, Kass & Raftery's
-# "very strong"), both with the round's effective sample size (Diagnoser.inter_wins). Records from the independent bench (solve_ivp on the held input, the config says foh);
-# before the margin these were named input_delay (seed 1002) and unmodeled_dynamics (seed 1008).
+# "very strong"), both with the round's effective sample size (Diagnoser.inter_wins). Records from the
+# independent bench (solve_ivp on the held input, the config says foh); before the margin these were named input_delay (seed 1002) and unmodeled_dynamics (seed 1008).
 @pytest.mark.parametrize("seed,magnitude", [(1002, "medium"), (1008, "small"), (1008, "medium")])
 def test_intersample_preferred_to_a_delay_that_only_mimics_it(tmp_path, seed, magnitude):
     case = make_case("intersample", "pendulum", seed, magnitude=magnitude, noise=0.02, colour="ar0.9",
