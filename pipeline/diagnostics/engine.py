@@ -53,7 +53,7 @@ from .form import Accepted, form_test
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
 from .gain import gain_ci, unbounded_note
-from .state_probe import NAME as PROBE_NAME, probe_hypotheses
+from .state_probe import NAME as PROBE_NAME, probe_hypotheses, what as probe_what, where as probe_where
 from .pairs import Member, hidden_pairs
 from .revisit import Link, revisit
 from .why import LOOKED_AHEAD
@@ -879,7 +879,9 @@ class Diagnoser:
             cols = [self.sensitivity(fit, replace(h, key=f"{h.key}:{i}", terms=[t], coefs=[c]), ctx.X)
                     for i, (t, c) in enumerate(zip(h.terms, h.coefs))]
             if all(S is not None for S in cols):
-                res.append((h, self.statistic(fit, np.column_stack(cols))))
+                S = stats.determined(np.column_stack(cols), self._basis(fit))
+                if S.shape[1]:
+                    res.append((h, self.statistic(fit, S)))
         if not res:
             return []
         h, w = min(res, key=lambda x: x[1].p_value)
@@ -888,9 +890,9 @@ class Diagnoser:
         lo, hi = h.info["range"]
         return [stats.TestResult(
             PROBE_NAME, w.statistic, p, None, p >= self.alpha,
-            f"{w.dof} Gaussian bumps of {h.state} (centres {lo:.4g} to {hi:.4g}) added to the equation of "
-            f"{h.equation}, HAC Wald test beyond the current parameters, Bonferroni over {len(res)} "
-            f"equation-state pairs; they explain {100 * w.r2:.2g} % of the residual", r2=w.r2)]
+            f"{probe_what(h)} (centres {lo:.4g} to {hi:.4g}) added to {probe_where(h)}, "
+            f"HAC Wald test of {w.dof} directions beyond the current parameters, Bonferroni over {len(res)} places (equation-state "
+            f"pairs and measured states); they explain {100 * w.r2:.2g} % of the residual", r2=w.r2)]
 
     def probe_refit(self, fit: FitResult) -> stats.TestResult | None:
         """The ``state_nonlinearity`` probe refitted: before the noise families may explain a coloured
@@ -931,10 +933,10 @@ class Diagnoser:
         lo, hi = h.info["range"]
         return stats.TestResult(
             PROBE_NAME + "_refit", float(g["relative"]), float(g.get("p_not_lower", 1.0)), None, not fails,
-            ("a static function of " + h.state + " that no family's term holds acts in the equation of "
-             + h.equation + ": " if fails else "") +
-            f"{len(h.coefs)} Gaussian bumps of {h.state} (centres {lo:.4g} to {hi:.4g}) in the equation of "
-            f"{h.equation}, refitted: validation RMSE (free run) {g['before']:.4g} -> {g['after']:.4g} "
+            ("a static function of " + h.state + " that no family's term holds acts in " + probe_where(h)
+             + ": " if fails else "") +
+            f"{probe_what(h)} (centres {lo:.4g} to {hi:.4g}) in {probe_where(h)}, "
+            f"refitted: validation RMSE (free run) {g['before']:.4g} -> {g['after']:.4g} "
             f"({100 * g['relative']:+.1f} %, 95 % interval {100 * g['ci95'][0]:+.1f} to {100 * g['ci95'][1]:+.1f} %; "
             f"the mean square {100 * share:+.1f} %); likelihood-ratio p = {lr.p_value:.3g} on the estimation part "
             f"({lr.detail})", r2=max(share, 0.0))

@@ -384,6 +384,25 @@ def column_basis(J: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(u[:, keep])
 
 
+def determined(S: np.ndarray, basis: np.ndarray, rtol: float = 1e-6) -> np.ndarray:
+    """The directions of S's column space that the current parameters cannot already produce and the
+    record determines: S⊥ = S − U_r U_rᵀ S (``basis`` = :func:`column_basis` of J), then its left
+    singular directions scaled by their singular values, σ_i·u_i, for σ_i > ``rtol``·max_j ‖S_j‖ (as
+    ``adequacy.model_error_model`` keeps a smooth input's well-determined lags). A probe term collinear
+    with a free parameter's sensitivity (an output gain beside an input gain) leaves a column of rounding
+    noise after the projection, which a Wald test would treat as a regressor. When every direction is
+    determined S itself is returned, so such a test is exactly the test on S (the kept directions span
+    the same space, but the HAC estimate's design correction is not exactly invariant to the basis)."""
+    S = np.atleast_2d(np.asarray(S, float).T).T
+    scale = float(np.max(np.linalg.norm(S, axis=0))) if S.size else 0.0
+    Sp = S - basis @ (basis.T @ S) if basis is not None and basis.size else S
+    if not scale > 0:
+        return Sp[:, :0]
+    u, sv, _ = np.linalg.svd(Sp, full_matrices=False)
+    keep = sv > rtol * scale
+    return S if keep.all() else u[:, keep] * sv[keep]
+
+
 def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndarray | None = None) -> WaldResult:
     """Does adding the columns S (output sensitivities of new parameters) explain the residual e,
     beyond the current parameters' sensitivities J? Regress e on S⊥ = (I − J J⁺) S (Frisch–Waugh),

@@ -60,7 +60,8 @@ def test_correct_models_pass_the_probe(tmp_path, base, colour, input_kind):
 
 def test_probe_hypotheses_sit_in_the_dynamic_equations(tmp_path, monkeypatch):
     """On a mass-spring-damper (x' = v, v' = …) the probe tests bumps of x and of v in the equation of v
-    only (no term in the kinematic equation x' = v), K coefficients each."""
+    only (no term in the kinematic equation x' = v), K coefficients each, and a gain and K bumps of the
+    measured state x added to its output (a sensor's static law)."""
     from pipeline.diagnostics import engine
     seen = {}
     real = engine.Diagnoser.run
@@ -72,8 +73,12 @@ def test_probe_hypotheses_sit_in_the_dynamic_equations(tmp_path, monkeypatch):
     monkeypatch.setattr(engine.Diagnoser, "run", run)
     _run(make_case("none", "msd", 1000, n=2000, out_dir=tmp_path))
     hyps = probe_hypotheses(seen["dg"].context(seen["d"].final, None))
-    assert sorted(h.key for h in hyps) == [f"{NAME}:v:v", f"{NAME}:v:x"]
-    assert all(len(h.coefs) == K and len(h.terms) == K for h in hyps)
+    assert sorted(h.key for h in hyps) == [f"{NAME}:output:x", f"{NAME}:v:v", f"{NAME}:v:x"]
+    dyn = [h for h in hyps if h.output is None]
+    assert all(len(h.coefs) == K and len(h.terms) == K and h.equation == "v" for h in dyn)
+    out = next(h for h in hyps if h.output == "x")
+    assert len(out.coefs) == K + 1 and all(t.is_output and t.target == "x" for t in out.terms)
+    assert out.terms[0].text == "x"                      # the gain
     assert Structure.of(seen["d"].final.model).dynamic_eqs == ["v"]
 
 
