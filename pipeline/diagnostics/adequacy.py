@@ -16,6 +16,17 @@ Adequacy tests on the estimation residual of every output against every input (e
   hysteresis on the input adds a term of the same sign pattern; neither is a linear function of the
   input, so the model-error model above cannot see it, and the residual it leaves is smooth and
   easily taken for coloured noise;
+* ``input_rate``: the same for an input term following the signed square of the input's increments,
+  r_t = Δu_t·|Δu_t| (:func:`rate_signal`). A rate (slew) limit R in the actuator turns a held step of
+  size Δu into a ramp of length |Δu|/R, so the input the plant misses is a pulse of area
+  Δu·|Δu|/(2R) after each change: quadratic in the step, which a delay or a lag (linear in the input)
+  cannot follow. Fitted with a delay, a lag or nothing, such a record's residual was taken for
+  coloured noise or left a delay named as the cause (an independent-bench generator with a slew
+  limit, 2 % white noise: 9 of 54 records named a delay or a lag as the whole explanation, 4 more
+  coloured noise). Not for
+  an input whose changes all have one size (a two-level PRBS): r_t is then a multiple of Δu_t, and
+  a rate limit is exactly a fixed input shaping, which the families ``input_delay`` and
+  ``unmodeled_dynamics`` test;
 * ``input_coherence``: the magnitude-squared coherence of residual and input at every frequency the
   input excites, against its exact null Beta(1, K − 1) (:mod:`.coherence`): a missing lightly damped
   mode leaves input dynamics at lags far beyond the first two tests' 25 and 15.
@@ -44,7 +55,7 @@ from . import stats
 from .coherence import input_coherence
 
 FIR_ORDER = 15
-N_TESTS = 4          # per input-output pair: cross-correlation, model-error model, input direction, coherence
+N_TESTS = 5          # per input-output pair: cross-correlation, model-error model, input direction, input rate, coherence
 # a significant test fails adequacy only when the dependence it finds is material: it explains at least
 # this share of the residual's sum of squares (with N in the thousands, a 0.1 % misfit is significant)
 MATERIAL_R2 = 0.02
@@ -98,7 +109,14 @@ def direction_signal(u: np.ndarray) -> np.ndarray:
 DIRECTION_MIN_SWITCHES = 4
 
 
-def input_direction_sensitivity(fit, prob, j: int) -> np.ndarray | None:
+def rate_signal(u: np.ndarray) -> np.ndarray:
+    """r_t = Δu_t·|Δu_t|, Δu_t = u_t − u_{t−1} (0 at the first sample): the signed square of the input's
+    increments, the pulse area a rate limit removes after each change, up to the factor 1/(2R)."""
+    du = np.diff(u, prepend=u[0])
+    return du * np.abs(du)
+
+
+def input_direction_sensitivity(fit, prob, j: int, base: np.ndarray | None = None) -> np.ndarray | None:
     """(n_est, ny) response of the fitted simulation to the perturbation u_j → u_j + ε·d̃_t (d̃ the
     direction signal, centred and scaled on the estimation part), by a forward difference; None when
     the direction carries nothing beyond the input itself (a two-level input: d_t = sign(u_t − ū)), the
@@ -112,10 +130,36 @@ def input_direction_sensitivity(fit, prob, j: int) -> np.ndarray | None:
     known = de != 0
     if stats.affine_in(de[known], u[sl][known], 1e-3):
         return None
+    return _input_term_sensitivity(fit, prob, j, d, base)
+
+
+def input_rate_sensitivity(fit, prob, j: int, base: np.ndarray | None = None) -> np.ndarray | None:
+    """(n_est, ny) response of the fitted simulation to u_j → u_j + ε·r̃_t (r̃ = :func:`rate_signal`,
+    centred and scaled on the estimation part); None when the input changes fewer than
+    ``DIRECTION_MIN_SWITCHES`` times, when r is a multiple of Δu (all changes of one size, up to
+    1e-3 of r's spread), or when the model cannot be simulated."""
+    sl = prob.split.est_slice()
+    u = prob.U[:, j]
+    r = rate_signal(u)
+    du = np.diff(u, prepend=u[0])[sl]
+    moved = du != 0
+    if np.count_nonzero(moved) < DIRECTION_MIN_SWITCHES or stats.affine_in(r[sl][moved], du[moved], 1e-3):
+        return None
+    return _input_term_sensitivity(fit, prob, j, r, base)
+
+
+def _input_term_sensitivity(fit, prob, j: int, d: np.ndarray, base: np.ndarray | None) -> np.ndarray | None:
+    """The forward-difference response of the fitted simulation to u_j → u_j + ε·(d − d̄)/sd(d), the
+    mean and spread taken on the estimation part, over the estimation rows. ``base``: the fit's own
+    simulation up to the end of the estimation part (:func:`_base`), when several terms share it."""
+    sl = prob.split.est_slice()
+    u = prob.U[:, j]
+    de = d[sl]
     v = (d - de.mean()) / np.std(de)
     eps = 1e-4 * (float(np.std(u[sl])) or 1.0)
     stop = prob.split.est[1]
-    base = simulate_until(fit.model, prob, fit.x0, stop)
+    if base is None:
+        base = _base(fit, prob)
     U1 = prob.U.copy()
     U1[:, j] = u + eps * v
     pert = simulate_until(fit.model, dataclasses.replace(prob, U=U1), fit.x0, stop)
@@ -125,17 +169,35 @@ def input_direction_sensitivity(fit, prob, j: int) -> np.ndarray | None:
     return S if np.all(np.isfinite(S)) and np.any(S) else None
 
 
+def _base(fit, prob) -> np.ndarray | None:
+    """The fit's simulation up to the end of the estimation part (the input terms' common baseline)."""
+    return simulate_until(fit.model, prob, fit.x0, prob.split.est[1])
+
+
 def input_direction_test(fit, prob, i: int, j: int, S: np.ndarray, alpha: float) -> stats.TestResult:
     """HAC Wald test (:func:`stats.added_terms_test`: feasible GLS, fixed-b) of the direction
     sensitivity S[:, i] in the residual of output i, beyond the fitted parameters' sensitivities."""
+    return _input_term_test(fit, i, S, alpha, "input_direction",
+                            "an input term following the direction of the input's last change (backlash, play "
+                            "or hysteresis in the actuator)")
+
+
+def input_rate_test(fit, prob, i: int, j: int, S: np.ndarray, alpha: float) -> stats.TestResult:
+    """HAC Wald test of the rate sensitivity S[:, i] (:func:`input_rate_sensitivity`) in the residual of
+    output i, beyond the fitted parameters' sensitivities."""
+    return _input_term_test(fit, i, S, alpha, "input_rate",
+                            "an input term following the signed square of the input's increments (a rate or "
+                            "slew limit in the actuator: a step becomes a ramp that lasts longer for a larger step)")
+
+
+def _input_term_test(fit, i: int, S: np.ndarray, alpha: float, name: str, what: str) -> stats.TestResult:
     ny = fit.resid_est.shape[1]
     e = fit.resid_est[:, i]
     J = fit.jac[i::ny] if fit.jac is not None and fit.jac.size else np.zeros((len(e), 0))
     w = stats.added_terms_test(e, J, S[:, i:i + 1])
-    t = stats.TestResult("input_direction", w.statistic, w.p_value, None, w.p_value >= alpha,
-                         f"HAC Wald test of the model's response to an input term following the direction of "
-                         f"the input's last change (backlash, play or hysteresis in the actuator); it explains "
-                         f"{100 * w.r2:.2g} % of the residual")
+    t = stats.TestResult(name, w.statistic, w.p_value, None, w.p_value >= alpha,
+                         f"HAC Wald test of the model's response to {what}; it explains {100 * w.r2:.2g} % of "
+                         f"the residual")
     t.r2 = w.r2
     return t
 
@@ -148,7 +210,10 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     if not pairs:
         return []
     a = alpha / (N_TESTS * len(pairs))
-    sens = {j: input_direction_sensitivity(fit, prob, j) for j in sorted({j for _, j in pairs})}
+    inputs = sorted({j for _, j in pairs})
+    base = _base(fit, prob)
+    sens = {j: input_direction_sensitivity(fit, prob, j, base) for j in inputs}
+    rate = {j: input_rate_sensitivity(fit, prob, j, base) for j in inputs}
     ts = prob.t[sl]
     dt = float(np.median(np.diff(ts))) if len(ts) > 1 else 1.0    # the coherence row's frequency unit
     out = []
@@ -160,6 +225,8 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
         tests = [xc, model_error_model(e, u, a)]
         if sens[j] is not None:
             tests.append(input_direction_test(fit, prob, i, j, sens[j], a))
+        if rate[j] is not None:
+            tests.append(input_rate_test(fit, prob, i, j, rate[j], a))
         coh = input_coherence(e, u, a, dt)
         if coh is not None:
             tests.append(coh)
