@@ -386,6 +386,62 @@ def xexp(ctx: Ctx) -> Effect:
     return e
 
 
+def sensor_law(ctx: Ctx) -> Effect:
+    """A static law in the sensor of the first measured output: y = z + c·(z − z̄)³ (z̄ the pilot's mean),
+    std(c·(z − z̄)³) = FRAC[m]·std(y) over the pilot. No family holds it (the families act on the
+    dynamics, an output offset is a constant)."""
+    b = ctx.base
+    y0 = ctx.pilot.Y[:, 0]
+    zbar = float(np.mean(y0))
+    c = FRAC[ctx.mag] * float(np.std(y0)) / float(np.std((y0 - zbar) ** 3))
+    j = b.index(b.measured[0])
+
+    def apply(pl: Plant) -> None:
+        def out(t, X):
+            add = np.zeros((len(X), len(b.measured)))
+            add[:, 0] = c * (X[:, j] - zbar) ** 3
+            return add
+        pl.output_add = out
+    return Effect("sensor_law", kind="out_of_vocabulary", acts_on={"output": b.measured[0]},
+                  params={"law": "y = z + c*(z - centre)**3", "c": c, "centre": zbar}, apply=apply)
+
+
+def modulated_stiffness(ctx: Ctx) -> Effect:
+    """The restoring coefficient breathes: −k·x becomes −k·(1 + a·sin(ωt))·x, three cycles per record
+    (a temperature or supply ripple), i.e. −a·k·sin(ωt)·x added to the force equation, sized as the
+    additive families (std over the pilot = FRAC[m]·std(derivative)). Neither a step
+    (``parameter_jump``) nor a straight line (``parameter_drift``), nor a forcing independent of the
+    state (``periodic_disturbance``)."""
+    b = ctx.base
+    eq = b.force_eq
+    i, n = b.index(eq), len(b.states)
+    j = b.index(b.pos)
+    om = 2 * math.pi * 3.0 / ctx.duration
+    vals = np.sin(om * ctx.pilot.t) * ctx.x(b.pos)
+    a = _scaled(ctx, eq, vals)
+    return Effect("modulated_stiffness", kind="out_of_vocabulary", acts_on={"equation": eq},
+                  params={"form": "-a*sin(2*pi*f*t)*x", "a": a, "f_hz": om / (2 * math.pi)},
+                  apply=lambda pl: pl.additive.append(_add(i, n, lambda t, x, z, u, p: -a * math.sin(om * t) * x[j])))
+
+
+def rate_limit(ctx: Ctx) -> Effect:
+    """A slew-rate limit in the actuator of input 0: u_a' = R·tanh((u − u_a)/(R·τ_f)), the plant sees u_a
+    (τ_f = dt/50: a rate limiter |u_a'| ≤ R, smoothed so the integrator can follow it); R = 0.6, 0.35,
+    0.15 × the input's largest rate over the pilot. Not a lag (its ramps last longer for larger steps)
+    nor a delay."""
+    b = ctx.base
+    u = ctx.pilot.U[:, 0]
+    R = (0.6, 0.35, 0.15)[ctx.mag] * float(np.max(np.abs(np.diff(u)))) / b.dt
+    tf = 0.02 * b.dt
+
+    def apply(pl: Plant) -> None:
+        pl.extra_x0 = [float(pl.signal.value(0.0)[0])]
+        pl.actuator_state = 0
+        pl.extra = lambda t, x, z, u_raw, p: np.array([R * math.tanh((u_raw[0] - z[0]) / (R * tf))])
+    return Effect("rate_limit", kind="out_of_vocabulary", acts_on={"input": b.inputs[0]},
+                  params={"rate": R, "smoothing_s": tf}, apply=apply)
+
+
 FAMILIES: dict[str, Callable[[Ctx], Effect]] = {
     "none": none, "offset": offset, "output_offset": None, "cubic_stiffness": cubic_stiffness,
     "quadratic_damping": quadratic_damping, "coulomb_friction": coulomb_friction,
@@ -397,7 +453,8 @@ FAMILIES: dict[str, Callable[[Ctx], Effect]] = {
     "heteroscedastic_noise": heteroscedastic_noise, "intersample": intersample,
 }
 OUT_OF_VOCABULARY: dict[str, Callable[[Ctx], Effect]] = {
-    "backlash": backlash, "hysteresis": hysteresis, "wrong_order": wrong_order, "xexp": xexp}
+    "backlash": backlash, "hysteresis": hysteresis, "wrong_order": wrong_order, "xexp": xexp,
+    "sensor_law": sensor_law, "modulated_stiffness": modulated_stiffness, "rate_limit": rate_limit}
 
 
 def output_offset(ctx: Ctx) -> Effect:
@@ -429,13 +486,16 @@ SUPPORTED: dict[str, tuple[str, ...]] = {
     "parameter_drift": ALL, "unmodeled_dynamics": ALL, "state_saturation": ("tank", "msd"),
     "colored_noise": ALL, "heavy_tailed_noise": ALL, "heteroscedastic_noise": ALL, "intersample": ALL,
     "backlash": ("msd", "pendulum", "dcmotor"), "hysteresis": ("msd",), "wrong_order": ("msd", "dcmotor", "tank"),
-    "xexp": ("msd", "pendulum"),
+    "xexp": ("msd", "pendulum"), "sensor_law": ("msd", "pendulum", "tank"),
+    "modulated_stiffness": ("msd", "pendulum"), "rate_limit": ("msd", "dcmotor", "tank"),
 }
 # inputs that make a family unidentifiable: a clipped or dead-banded two-level PRBS is a gain change;
 # so is a two-level PRBS through a backlash (play operator of width w: after every switch of ±a the
 # output is ±(a − w/2), exactly a dead zone's or a gain's output, so no record can tell them apart;
 # the bench of 2026-12-02 named dead_zone on 4 of 6 such records, each to the noise floor)
-UNIDENTIFIABLE = {("input_saturation", "prbs"), ("dead_zone", "prbs"), ("backlash", "prbs")}
+# ... and a slew limit R on a two-level PRBS (levels ±a) makes every switch the same ramp of length 2a/R:
+# the input convolved with a box of that width, a linear input filter, which no record can tell from one
+UNIDENTIFIABLE = {("input_saturation", "prbs"), ("dead_zone", "prbs"), ("backlash", "prbs"), ("rate_limit", "prbs")}
 # ... and on some bases only: the static nonlinearity off the tank is u**2, a constant (an offset) when u
 # is a two-level PRBS (the full bench grid of 2026-12-02 failed there with a division by its zero std)
 UNIDENTIFIABLE_ON = {("static_nonlinearity", "prbs"): tuple(b for b in ALL if b != "tank")}
