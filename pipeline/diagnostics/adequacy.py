@@ -55,7 +55,8 @@ from . import stats
 from .coherence import input_coherence
 
 FIR_ORDER = 15
-N_TESTS = 5          # per input-output pair: cross-correlation, model-error model, input direction, input rate, coherence
+# per input-output pair: cross-correlation, model-error model, input direction, input rate, coherence
+N_TESTS = 5
 # a significant test fails adequacy only when the dependence it finds is material: it explains at least
 # this share of the residual's sum of squares (with N in the thousands, a 0.1 % misfit is significant)
 MATERIAL_R2 = 0.02

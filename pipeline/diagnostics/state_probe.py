@@ -25,8 +25,9 @@ law is mostly a gain over the output's range, which the bumps on the 10–90 % q
 parameters already produce (an output gain beside a free input gain) are dropped before the test
 (:func:`stats.determined`).
 
-The row's p is Bonferroni over the places tested (equation–state pairs and measured states); like every adequacy row it
-fails adequacy only when it also explains ``MATERIAL_R2`` of the residual (:func:`adequacy.material`).
+The row's p is Bonferroni over the places tested (equation–state pairs and measured states); like
+every adequacy row it fails adequacy only when it also explains ``MATERIAL_R2`` of the residual
+(:func:`adequacy.material`).
 
 Measured on the independent bench's tuning seeds (final models): 1 of 126 null and coloured-noise
 records significant at 0.01 (share 0.9 %, not material), none of 84 heavy-tailed or heteroscedastic

@@ -13,6 +13,7 @@ import yaml
 from scipy.signal import lfilter
 
 from pipeline.config import load_config
+from pipeline.diagnostics.adequacy import MATERIAL_R2
 from pipeline.data import load_record, make_split
 from pipeline.fit import Problem
 from pipeline.model import Model
@@ -41,6 +42,16 @@ def p_and_share(n: int, row_of) -> tuple[np.ndarray, np.ndarray]:
     ``row_of(k)``, k = 0..n−1, in that order (so the records' random draws stay the same)."""
     rows = [row_of(k) for k in range(n)]
     return np.array([r.p_value for r in rows]), np.array([r.r2 for r in rows])
+
+
+def assert_sized(p: np.ndarray, share: np.ndarray, phi: float) -> None:
+    """The size checks of an adequacy row on correct structures: it rejects at most 1.5 α at α = 5 % and
+    1 %, the adequacy rule (p < 1 % and a share ≥ MATERIAL_R2) fires at most 1 % of the time,
+    and (at φ = 0.5) it is not a test that never rejects."""
+    assert np.mean(p < 0.05) <= 1.5 * 0.05
+    assert np.mean(p < 0.01) <= 1.5 * 0.01
+    assert np.mean((p < 0.01) & (share >= MATERIAL_R2)) <= 0.01
+    assert np.mean(p < 0.05) >= 0.005 or phi == 0.9
 
 
 def with_noise(x: np.ndarray, noise: np.ndarray, level: float = 0.05) -> np.ndarray:
