@@ -5,6 +5,8 @@ and loaded as the pipeline loads a user's record. Written here, sharing no code 
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +17,7 @@ from scipy.signal import lfilter
 from pipeline.config import load_config
 from pipeline.diagnostics.adequacy import MATERIAL_R2
 from pipeline.data import load_record, make_split
-from pipeline.fit import Problem
+from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
 
 
@@ -52,6 +54,17 @@ def assert_sized(p: np.ndarray, share: np.ndarray, phi: float) -> None:
     assert np.mean(p < 0.01) <= 1.5 * 0.01
     assert np.mean((p < 0.01) & (share >= MATERIAL_R2)) <= 0.01
     assert np.mean(p < 0.05) >= 0.005 or phi == 0.9
+
+
+def fitted_row(prob: Problem, model: Model, sensitivity, test):
+    """Fit the nominal model by output error and run one input-term adequacy row on it: ``sensitivity``
+    (fit, prob, j) and ``test`` (fit, prob, i, j, S, α) of :mod:`pipeline.diagnostics.adequacy`, input and
+    output 0, α = 0.01. Returns (row, fit, prob); the sensitivity must exist."""
+    with contextlib.redirect_stderr(io.StringIO()):
+        fit = fit_output_error(model, prob)
+    S = sensitivity(fit, prob, 0)
+    assert S is not None
+    return test(fit, prob, 0, 0, S, 0.01), fit, prob
 
 
 def with_noise(x: np.ndarray, noise: np.ndarray, level: float = 0.05) -> np.ndarray:

@@ -25,8 +25,8 @@ from pipeline.diagnostics.adequacy import (MATERIAL_R2, adequacy_tests, directio
                                            input_direction_sensitivity, input_direction_test, material)
 from pipeline.fit import Problem, fit_output_error
 from pipeline.model import Model
-from tests.diagnosis.first_order import (ar1, assert_sized, held_steps, p_and_share, problem, with_noise,
-                                         zoh_first_order)
+from tests.diagnosis.first_order import (ar1, assert_sized, fitted_row, held_steps, p_and_share, problem,
+                                         with_noise, zoh_first_order)
 
 DT, N = 0.1, 800
 
@@ -60,11 +60,7 @@ def _problem(tmp, k: int, rng: np.random.Generator, phi: float, width: float) ->
 
 def _direction_row(tmp, k, rng, phi, width):
     prob, model = _problem(tmp, k, rng, phi, width)
-    with contextlib.redirect_stderr(io.StringIO()):
-        fit = fit_output_error(model, prob)
-    S = input_direction_sensitivity(fit, prob, 0)
-    assert S is not None
-    return input_direction_test(fit, prob, 0, 0, S, 0.01), fit, prob
+    return fitted_row(prob, model, input_direction_sensitivity, input_direction_test)
 
 
 @pytest.mark.slow

@@ -31,8 +31,8 @@ from pipeline.bench.independent.case import make_case
 from pipeline.fit import fit_output_error
 from pipeline.runs import analyse
 from pipeline.config import load_config
-from tests.diagnosis.first_order import (ar1, assert_sized, held_steps, p_and_share, problem, with_noise,
-                                         zoh_first_order)
+from tests.diagnosis.first_order import (ar1, assert_sized, fitted_row, held_steps, p_and_share, problem,
+                                         with_noise, zoh_first_order)
 
 DT, N, FINE = 0.1, 800, 100
 A, B = 0.8, 1.0
@@ -61,11 +61,7 @@ def _row(tmp, k, rng, phi, rate):
     u = held_steps(rng, N)
     y0 = _slew_limited_response(u, rate) if rate else zoh_first_order(u, DT, A, B)
     prob, model = problem(tmp / f"r{k}", DT, u, with_noise(y0, ar1(rng, N, phi)), "rate")
-    with contextlib.redirect_stderr(io.StringIO()):
-        fit = fit_output_error(model, prob)
-    S = input_rate_sensitivity(fit, prob, 0)
-    assert S is not None
-    return input_rate_test(fit, prob, 0, 0, S, 0.01), fit, prob
+    return fitted_row(prob, model, input_rate_sensitivity, input_rate_test)
 
 
 @pytest.mark.slow
