@@ -29,7 +29,11 @@ Adequacy tests on the estimation residual of every output against every input (e
   ``unmodeled_dynamics`` test;
 * ``input_coherence``: the magnitude-squared coherence of residual and input at every frequency the
   input excites, against its exact null Beta(1, K − 1) (:mod:`.coherence`): a missing lightly damped
-  mode leaves input dynamics at lags far beyond the first two tests' 25 and 15.
+  mode leaves input dynamics at lags far beyond the first two tests' 25 and 15;
+* ``parameter_stability`` (one per output, :mod:`.stability`): the residual regressed on each free
+  parameter's sensitivity times sin and cos of k cycles per estimation record (Becker, Enders & Hurn
+  2004), k = 1…5: a parameter that varies during the record (a stiffness breathing with a ripple),
+  which leaves a smooth residual no input term and no noise model explains.
 
 The engine adds ``state_nonlinearity`` (:mod:`.state_probe`: Gaussian bumps of each state, tested
 with the hypotheses' sensitivity machinery), ``state_nonlinearity_refit`` (those bumps refitted and
@@ -53,6 +57,7 @@ from scipy.stats import chi2, norm
 from ..fit import simulate_until
 from . import stats
 from .coherence import input_coherence
+from .stability import parameter_stability_test
 
 FIR_ORDER = 15
 # per input-output pair: cross-correlation, model-error model, input direction, input rate, coherence
@@ -204,13 +209,15 @@ def _input_term_test(fit, i: int, S: np.ndarray, alpha: float, name: str, what: 
 
 
 def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
-    """Every output × every input; the level of each is α / (number of pairs × ``N_TESTS``)."""
+    """Every output × every input, and the parameter-stability row of every output; the level of each
+    is α / (number of pairs × ``N_TESTS`` + number of outputs) (Bonferroni over the rows)."""
     sl = prob.split.est_slice()
-    pairs = [(i, j) for i in range(fit.resid_est.shape[1]) for j in range(prob.U.shape[1])
+    ny = fit.resid_est.shape[1]
+    pairs = [(i, j) for i in range(ny) for j in range(prob.U.shape[1])
              if np.ptp(prob.U[sl, j]) > 0]
     if not pairs:
         return []
-    a = alpha / (N_TESTS * len(pairs))
+    a = alpha / (N_TESTS * len(pairs) + ny)
     inputs = sorted({j for _, j in pairs})
     base = _base(fit, prob)
     sens = {j: input_direction_sensitivity(fit, prob, j, base) for j in inputs}
@@ -234,6 +241,12 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
         for t in tests:
             t.name += tag
             out.append(t)
+    weights = prob.weights
+    for i in range(ny):
+        st = parameter_stability_test(fit, i, float(weights[i]), a)
+        if st is not None:
+            st.name += f"[{prob.out_names[i]}]" if ny > 1 else ""
+            out.append(st)
     return out
 
 
