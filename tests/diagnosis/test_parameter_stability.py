@@ -107,3 +107,14 @@ def test_a_rippling_stiffness_is_unexplained_not_coloured_noise(tmp_path, base, 
     assert d["verdict"] == "unexplained_discrepancy" and d["findings"] == []
     row = next(t for t in d["adequacy"] if t["name"] == "parameter_stability")
     assert not row["passed"] and row["explained_share"] >= MATERIAL_R2
+
+
+def test_one_row_per_output_on_two_outputs(tmp_path):
+    """Two measured outputs (the bench's two thermal zones, solve_ivp, no effect): a row for each,
+    named by its output, and neither fails on the correct structure."""
+    case = make_case("none", "mimo", 0, noise=0.02, colour="white", input_kind="held", n=2000, out_dir=tmp_path)
+    with contextlib.redirect_stderr(io.StringIO()):
+        d = analyse(load_config(Path(case.dir) / "config.yaml")).summary["diagnosis"]
+    rows = {t["name"]: t for t in d["adequacy"] if t["name"].startswith("parameter_stability")}
+    assert sorted(rows) == ["parameter_stability[T1]", "parameter_stability[T2]"]
+    assert all(t["passed"] for t in rows.values())
