@@ -195,7 +195,7 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
             "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history),
-                                                             "why": why_unexplained(diag.history)},
+                                                             "why": why_unexplained(diag.history, diag.adequacy)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history, "revisit": diag.revisit,

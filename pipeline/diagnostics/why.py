@@ -23,6 +23,7 @@ candidate record) so that the verdict reads as a conclusion, not as a list."""
 
 from __future__ import annotations
 
+from .adequacy import MATERIAL_R2
 from .gain import is_unbounded
 
 ALIKE = 0.8          # another family's point gain at least this share of the best one's is "alike"
@@ -53,12 +54,32 @@ def refitted_not_accepted(history: list[dict]) -> list[dict]:
     return rows
 
 
-def why_unexplained(history: list[dict]) -> dict:
+def varying_parameters(adequacy) -> str:
+    """The sentence for a failed, material ``parameter_stability`` row (:mod:`.stability`), or "": the
+    final model's parameters are not constant over the record, which no family describes unless the
+    change is one step or a straight line (those families were tested and not taken)."""
+    for t in adequacy:
+        if t.name.startswith("parameter_stability") and not t.passed and (t.r2 or 0.0) >= MATERIAL_R2:
+            where = t.detail.split("); ", 1)[-1]
+            return (f"The fitted parameters do not stay constant over the estimation record ({where}). "
+                    "No family holds a parameter that varies like this: a jump is one step and a drift a "
+                    "straight line.")
+    return ""
+
+
+def why_unexplained(history: list[dict], adequacy=()) -> dict:
     """``{"refitted": [...], "sentence": str}``: the refitted, not accepted extensions of the last round
     (hypothesis, family, gain, interval, degrees of freedom, kind of rejection) and one paragraph that says
     what kept them out. ``kind``: ``unbounded`` (the record cannot bound the gain), ``not_lower`` (a bounded
     interval that reaches 0), ``estimation`` (the interval is above 0; the likelihood-ratio test or another
-    estimation-part check is not passed)."""
+    estimation-part check is not passed). ``adequacy``: the final model's adequacy rows; a failed
+    parameter-stability row puts its sentence first (:func:`varying_parameters`)."""
+    w = _why(history)
+    first = varying_parameters(adequacy)
+    return {**w, "sentence": f"{first} {w['sentence']}"} if first else w
+
+
+def _why(history: list[dict]) -> dict:
     if history and any(c.get("accepted") for c in history[-1].get("candidates", [])):
         # the loop stopped at max_findings: its last round's refits were weighed against the model before
         # the final one, and the final model's own test round refits nothing

@@ -110,6 +110,7 @@ def test_a_rippling_stiffness_is_unexplained_not_coloured_noise(tmp_path, base, 
     row = next(t for t in d["adequacy"] if t["name"] == "parameter_stability")
     assert not row["passed"] and row["explained_share"] >= MATERIAL_R2
     assert f"most of it in {restoring}," in row["detail"]
+    assert d["unexplained"]["why"]["sentence"].startswith("The fitted parameters do not stay constant")
 
 
 def test_one_row_per_output_on_two_outputs(tmp_path):

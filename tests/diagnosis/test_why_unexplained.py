@@ -92,3 +92,22 @@ def test_a_look_ahead_that_found_no_second_cause_is_said():
                       "with offset:v in the model no further extension was accepted.")
     plain = [{"iteration": 1, "candidates": [_c("offset", "offset:v", 0.49, [-1.15, 0.88], 0.4)]}]
     assert "one more round" not in why_unexplained(plain)["sentence"]
+
+
+def _stability(p, r2):
+    from pipeline.diagnostics.stats import TestResult
+    return TestResult("parameter_stability", 30.0, p, None, p >= 0.0017,
+                      "trigonometric test of time-varying parameters (…, Bonferroni over k); strongest at 2 "
+                      "cycles, where the terms explain 23 % of the residual; most of it in k, whose best "
+                      "single-frequency variation swings by ±0.9 (±21 % of 4.3)", r2)
+
+
+def test_parameters_that_vary_are_said_first_and_only_when_the_row_fails_materially():
+    none = [{"iteration": 1, "candidates": [_c("offset", "offset:v", reason="not significant after Holm correction")]}]
+    s = why_unexplained(none, [_stability(1e-6, 0.23)])["sentence"]
+    assert s.startswith("The fitted parameters do not stay constant over the estimation record (strongest at 2 "
+                        "cycles, where the terms explain 23 % of the residual; most of it in k,")
+    assert s.endswith("none of their added-term tests was significant after Holm correction, so the misfit lies "
+                      "in no family's direction.")
+    assert why_unexplained(none, [_stability(0.5, 0.23)]) == why_unexplained(none)      # passed
+    assert why_unexplained(none, [_stability(1e-6, 0.01)]) == why_unexplained(none)     # not material
