@@ -23,7 +23,7 @@ candidate record) so that the verdict reads as a conclusion, not as a list."""
 
 from __future__ import annotations
 
-from .adequacy import MATERIAL_R2
+from .adequacy import material
 from .gain import is_unbounded
 
 ALIKE = 0.8          # another family's point gain at least this share of the best one's is "alike"
@@ -59,7 +59,7 @@ def varying_parameters(adequacy) -> str:
     final model's parameters are not constant over the record, which no family describes unless the
     change is one step or a straight line (those families were tested and not taken)."""
     for t in adequacy:
-        if t.name.startswith("parameter_stability") and not t.passed and (t.r2 or 0.0) >= MATERIAL_R2:
+        if t.name.startswith("parameter_stability") and material(t):
             where = t.detail.split("); ", 1)[-1]
             return (f"The fitted parameters do not stay constant over the estimation record ({where}). "
                     "No family holds a parameter that varies like this: a jump is one step and a drift a "
