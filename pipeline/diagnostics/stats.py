@@ -413,7 +413,9 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     removed from the estimate), by the prewhitened equal-weighted-cosine estimator (:mod:`pipeline.hac`;
     Andrews & Monahan 1992; Lazarus, Lewis, Stock & Watson 2018). W is referred to the fixed-b law
     W·(ν − q + 1)/(ν q) ~ F(q, ν − q + 1) (Lazarus et al. 2018, eq. (11); Kiefer & Vogelsang 2005)
-    with ν the Satterthwaite degrees of freedom of the estimate (:func:`pipeline.hac.satterthwaite_dof`). Plain Newey–West with a χ² reference
+    with ν the Satterthwaite degrees of freedom of the estimate (:func:`pipeline.hac.satterthwaite_dof`),
+    whose design part is, for several columns, the dof of the q×q estimate as one Wishart matrix
+    (:func:`pipeline.hac.joint_design_dof`, the "HTZ" test of Tipton & Pustejovsky 2015). Plain Newey–West with a χ² reference
     rejected 2.8 % (φ = 0.9) and 6.2 % (φ = 0.97) at nominal 1 % on AR(1) residuals.
 
     Before that, with ``GLS`` (default), the regression is AR-filtered (feasible GLS, Cochrane &
