@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.fft import dct, next_fast_len
 from scipy.linalg import qr
+from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 A_CAP = 0.99   # largest singular value allowed for the prewhitening VAR(1) matrix
 
@@ -177,21 +179,34 @@ def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tup
     and cos) rejected 0–2.7 % at nominal 5 % for q = 4 and 6 (N = 1000, ν ≈ 12–16; white and AR(1) 0.9
     residuals; mean p-value 0.605 where an exact test has 0.5); with η, 0.3–3.7 % (mean p 0.565): still
     conservative, less so, and never above the nominal size (``tests/diagnosis/test_mc_calibration.py``).
-    For q ≤ 2 the two are nearly the same. From ν ≥ ``JOINT_RATIO``·q the
-    reference law is within a few per cent of its χ² limit whichever of ν and η it uses, and η, which
-    costs q(q + 1)/2 cosine transforms of the record and a q²B² sum (0.8 s on Silverbox's 90 000 rows,
-    q = 5, against 0.09 s for the columns' ν), is not computed."""
+    For q ≤ 2 the two are nearly the same.
+
+    η is not computed where it cannot matter or would cost too much: when the level-5 % critical value
+    with ν is within ``JOINT_MIN_EFFECT`` of the χ² limit (η ≥ ν moves it less than that), and when q²B²,
+    the size of its sum, exceeds ``JOINT_MAX_WORK`` (it also takes q(q + 1)/2 cosine transforms of the
+    record: the FIR(15) row on Silverbox's 90 000 rows, B = 806, took 20 s for a critical value 1.5 %
+    lower, ν = 495 against η = 746). There the smallest column's ν stays: conservative."""
     kap, nus = design_terms(x, s, b)
     if not len(nus):
         return 1.0, float(b or ewc_dof(x.shape[0]))
     i = int(np.argmin(nus))
-    if len(nus) == 1 or nus[i] >= JOINT_RATIO * len(nus):
-        return float(kap[i]), float(nus[i])
+    q, nu = len(nus), float(nus[i])
+    bb = int(min(ewc_dof(x.shape[0]) if b is None else b, x.shape[0] // 2))
+    if q == 1 or q * q * bb * bb > JOINT_MAX_WORK or \
+            hotelling_critical(nu, q) < (1.0 + JOINT_MIN_EFFECT) * float(chi2.isf(0.05, q)):
+        return float(kap[i]), nu
     return float(kap[i]), joint_design_dof(x, s, b)
 
 
-JOINT_RATIO = 50           # design_correction: the smallest ν from this many times q on
+JOINT_MIN_EFFECT = 0.03     # η is computed only when ν's critical value is this much above the χ² limit
+JOINT_MAX_WORK = 20_000_000  # and q²B², its sum's size, is at most this (a FIR(15) on Silverbox: 1.5e8, 20 s)
 JOINT_BLOCK = 4_000_000     # entries of the q×q×r×B slab :func:`joint_design_dof` holds at once
+
+
+def hotelling_critical(nu: float, q: int, alpha: float = 0.05) -> float:
+    """The level-α critical value of W under the fixed-b law W·(ν − q + 1)/(νq) ~ F(q, ν − q + 1)."""
+    d2 = max(nu - q + 1.0, 1e-3)
+    return float(q * nu / d2 * f_dist.isf(alpha, q, d2))
 
 
 def joint_design_dof(x: np.ndarray, s: np.ndarray, b: int | None = None) -> float:

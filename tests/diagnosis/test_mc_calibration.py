@@ -408,6 +408,30 @@ def test_joint_design_dof_equals_its_definition():
     assert hac.joint_design_dof(x, s[:, :1], b) == pytest.approx(hac.design_terms(x, s[:, :1], b)[1][0], rel=1e-9)
 
 
+def test_design_correction_uses_the_joint_dof_only_where_it_matters_and_is_affordable(monkeypatch):
+    """Several smooth columns with few cosines: the reference law's ν is η. One column, a sum too large
+    to form (the FIR(15) row on Silverbox's rows: 20 s), or a ν whose critical value is already within
+    3 % of the χ² limit: the smallest column's ν."""
+    rng = np.random.default_rng(25)
+    n, b = 240, 10
+    x = _ar(rng, 0.9, (n, 2), 100)
+    t = (np.arange(n) + 0.5) / n
+    s = np.column_stack([x[:, 0] * np.sin(2 * np.pi * t), x[:, 0] * np.cos(2 * np.pi * t), x[:, 1]])
+    nu_min = hac.design_terms(x, s, b)[1].min()
+    eta = hac.joint_design_dof(x, s, b)
+    assert eta > nu_min
+    assert hac.design_correction(x, s, b)[1] == eta
+    assert hac.design_correction(x, s[:, :1], b)[1] == hac.design_terms(x, s[:, :1], b)[1][0]
+    monkeypatch.setattr(hac, "JOINT_MAX_WORK", 9 * b * b - 1)
+    assert hac.design_correction(x, s, b)[1] == nu_min
+    monkeypatch.setattr(hac, "JOINT_MAX_WORK", 9 * b * b)
+    assert hac.design_correction(x, s, b)[1] == eta
+    monkeypatch.setattr(hac, "JOINT_MIN_EFFECT", 10.0)
+    assert hac.design_correction(x, s, b)[1] == nu_min
+    # the critical value itself: Hotelling's T² quantile against scipy's F
+    assert hac.hotelling_critical(20.0, 3) == pytest.approx(3 * 20 / 18 * sps.f.isf(0.05, 3, 18), rel=1e-12)
+
+
 def test_joint_design_dof_is_the_wishart_dof_of_the_cosine_estimate():
     """What η means, by Monte Carlo: for white Gaussian ε, the standardised estimate D = L(Σ_j Λ_jΛ_jᵀ)Lᵀ,
     Λ_j = (W_aᵀMε)_j over the columns a, has Σ_st var D_st = q(q + 1)/η, as a Wishart matrix with η
