@@ -682,7 +682,7 @@ class Diagnoser:
             p_min = min(wr.p_value for _, wr in tested)
             sig = [(h, wr) for h, wr in tested if wr.p_value * len(hyps) < self.alpha]
             h, wr = (max(sig, key=lambda x: x[1].r2) if sig
-                     else max(tested, key=lambda x: x[1].statistic / x[1].dof))
+                     else max(tested, key=lambda x: x[1].statistic / max(x[1].dof, 1)))
             best = Candidate(h, wr, 1.0, [_wald_evidence(h, wr)])
             best.p_family = min(1.0, p_min * len(hyps))
             best = self._lr_screen(fit, fam, hyps, results, best, lr_done)

@@ -432,19 +432,23 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     e = np.asarray(e, float)
     J = np.asarray(J, float).reshape(len(e), -1)
     share = None
+    back = None          # (q × k) map from the determined directions' coefficients to S's columns
     if J.size and S.size:
         # a direction of S that J already produces (an output gain beside a free input gain) leaves a
         # column of rounding noise after the projection, which the Wald statistic would take for a
         # regressor: with one such column among six, 40 of 100 null records rejected at 5 %. Only the
-        # determined directions are tested (:func:`determined`); S itself when all of them are
+        # determined directions are tested (:func:`determined`), S itself when all of them are. Their
+        # coefficients are mapped back to S's columns (S⊥V_k = U_kΣ_k, so β = V_k β_k, the minimum-norm
+        # coefficients, and cov = V_k cov_k V_kᵀ), so callers read β and cov column by column as before
         S0 = S - basis @ (basis.T @ S) if basis is not None else S - J @ np.linalg.lstsq(J, S, rcond=None)[0]
         scale = float(np.max(np.linalg.norm(S, axis=0)))
-        u, sv, _ = np.linalg.svd(S0, full_matrices=False)
+        u, sv, vt = np.linalg.svd(S0, full_matrices=False)
         keep = sv > DETERMINED_RTOL * scale
         if not keep.all():
-            S = u[:, keep] * sv[keep]
+            q0 = S.shape[1]
+            S, back = u[:, keep] * sv[keep], vt[keep].T
             if not S.shape[1]:
-                return WaldResult(np.zeros(0), np.zeros((0, 0)), 0.0, 0, 1.0, 0.0, 0.0)
+                return WaldResult(np.zeros(q0), np.zeros((q0, q0)), 0.0, 0, 1.0, 0.0, 0.0)
     if GLS:
         # feasible GLS (Cochrane & Orcutt 1949): an AR(p) (Yule–Walker, p ≤ GLS_PMAX by AIC) fitted to
         # the unrestricted OLS residual filters e, J and S alike, so the long-run variance below is that
@@ -478,6 +482,8 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     p = float(stats.f.sf(stat * (nu - q + 1) / (nu * q), q, nu - q + 1))
     ee = float(e @ e)
     r2 = float(1.0 - float(eu @ eu) / ee) if ee > 0 else 0.0
+    if back is not None:
+        beta, V = back @ beta, back @ V @ back.T
     return WaldResult(beta, V, stat, q, p, r2, r2 if share is None else share)
 
 

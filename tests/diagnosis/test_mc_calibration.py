@@ -75,7 +75,14 @@ def test_added_terms_wald_tests_only_the_directions_the_current_parameters_canno
     assert dof == {5}
     assert np.mean(np.array(p) < 0.05) <= 1.5 * 0.05
     e = rng.standard_normal(n)
-    assert stats.added_terms_test(e, J, 2.0 * J[:, :2]).p_value == 1.0        # nothing left to test
+    w = stats.added_terms_test(e, J, 2.0 * J[:, :2])                          # nothing left to test
+    assert (w.p_value, w.dof, w.beta.shape, w.cov.shape) == (1.0, 0, (2,), (2, 2))
+    # the coefficients keep S's columns: the collinear column gets none, the others the plain test's
+    e = e + 0.5 * bumps[:, 2]
+    full = stats.added_terms_test(e, J, np.column_stack([3.0 * x, bumps]))
+    assert full.beta.shape == (6,) and full.cov.shape == (6, 6)
+    assert abs(full.beta[0]) < 1e-6 * np.max(np.abs(full.beta))
+    np.testing.assert_allclose(full.beta[1:], stats.added_terms_test(e, J, bumps).beta, rtol=1e-6, atol=1e-9)
 
 
 def test_added_terms_wald_still_detects_a_real_term_in_smooth_residuals():
