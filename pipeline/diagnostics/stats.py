@@ -401,9 +401,15 @@ def determined(S: np.ndarray, basis: np.ndarray, rtol: float = DETERMINED_RTOL) 
     Sp = S - basis @ (basis.T @ S) if basis is not None and basis.size else S
     if not scale > 0:
         return Sp[:, :0]
-    u, sv, _ = np.linalg.svd(Sp, full_matrices=False)
-    keep = sv > rtol * scale
+    u, sv, _, keep = _kept_directions(S, Sp, rtol)
     return S if keep.all() else u[:, keep] * sv[keep]
+
+
+def _kept_directions(S: np.ndarray, Sp: np.ndarray, rtol: float = DETERMINED_RTOL):
+    """The SVD u, σ, vᵀ of the projected columns Sp and which directions are determined:
+    σ_i > ``rtol``·max_j ‖S_j‖ (:func:`determined`)."""
+    u, sv, vt = np.linalg.svd(Sp, full_matrices=False)
+    return u, sv, vt, sv > rtol * float(np.max(np.linalg.norm(S, axis=0)))
 
 
 def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndarray | None = None) -> WaldResult:
@@ -433,6 +439,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     J = np.asarray(J, float).reshape(len(e), -1)
     share = None
     back = None          # (q × k) map from the determined directions' coefficients to S's columns
+    S0 = None            # S projected off J's columns, computed once
     if J.size and S.size:
         # a direction of S that J already produces (an output gain beside a free input gain) leaves a
         # column of rounding noise after the projection, which the Wald statistic would take for a
@@ -441,22 +448,21 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
         # coefficients are mapped back to S's columns (S⊥V_k = U_kΣ_k, so β = V_k β_k, the minimum-norm
         # coefficients, and cov = V_k cov_k V_kᵀ), so callers read β and cov column by column as before
         S0 = S - basis @ (basis.T @ S) if basis is not None else S - J @ np.linalg.lstsq(J, S, rcond=None)[0]
-        scale = float(np.max(np.linalg.norm(S, axis=0)))
-        u, sv, vt = np.linalg.svd(S0, full_matrices=False)
-        keep = sv > DETERMINED_RTOL * scale
+        u, sv, vt, keep = _kept_directions(S, S0)
         if not keep.all():
             q0 = S.shape[1]
-            S, back = u[:, keep] * sv[keep], vt[keep].T
+            S, back, S0 = u[:, keep] * sv[keep], vt[keep].T, None
             if not S.shape[1]:
                 return WaldResult(np.zeros(q0), np.zeros((q0, q0)), 0.0, 0, 1.0, 0.0, 0.0)
     if GLS:
         # feasible GLS (Cochrane & Orcutt 1949): an AR(p) (Yule–Walker, p ≤ GLS_PMAX by AIC) fitted to
         # the unrestricted OLS residual filters e, J and S alike, so the long-run variance below is that
         # of nearly white scores and keeps its degrees of freedom when the residual is very smooth
-        if basis is not None:
-            S0 = S - basis @ (basis.T @ S)
-        else:
-            S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
+        if S0 is None:
+            if basis is not None:
+                S0 = S - basis @ (basis.T @ S)
+            else:
+                S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
         eu0 = e - S0 @ np.linalg.lstsq(S0, e, rcond=None)[0]
         e0 = float(e @ e)
         share = float(1.0 - float(eu0 @ eu0) / e0) if e0 > 0 else 0.0
