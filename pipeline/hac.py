@@ -204,9 +204,12 @@ JOINT_BLOCK = 4_000_000     # entries of the q×q×r×B slab :func:`joint_design
 
 
 def hotelling_critical(nu: float, q: int, alpha: float = 0.05) -> float:
-    """The level-α critical value of W under the fixed-b law W·(ν − q + 1)/(νq) ~ F(q, ν − q + 1)."""
-    d2 = max(nu - q + 1.0, 1e-3)
-    return float(q * nu / d2 * f_dist.isf(alpha, q, d2))
+    """The level-α critical value of W under the fixed-b law W·(ν − q + 1)/(νq) ~ F(q, ν − q + 1), with
+    ν floored at q as :func:`pipeline.diagnostics.stats.added_terms_test` floors it (the law needs
+    ν − q + 1 > 0; a smaller ν used to be clipped to 10⁻³ denominator degrees of freedom, whose critical
+    value overflowed to inf with a RuntimeWarning)."""
+    nu = max(float(nu), float(q))
+    return float(q * nu / (nu - q + 1.0) * f_dist.isf(alpha, q, nu - q + 1.0))
 
 
 def joint_design_dof(x: np.ndarray, s: np.ndarray, b: int | None = None) -> float:

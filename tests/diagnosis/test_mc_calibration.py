@@ -439,6 +439,24 @@ def test_design_correction_uses_the_joint_dof_only_where_it_matters_and_is_affor
     assert hac.hotelling_critical(20.0, 3) == pytest.approx(3 * 20 / 18 * sps.f.isf(0.05, 3, 18), rel=1e-12)
 
 
+def test_hotelling_critical_uses_the_tests_own_law_below_q_degrees_of_freedom():
+    """A column's ν can be smaller than the number of columns q (a very smooth column): the test's law
+    (stats.added_terms_test) floors ν at q, so F(q, 1); the critical value compared with the χ² limit
+    must be that law's, finite and without a RuntimeWarning (it used to clip ν − q + 1 to 10⁻³, which
+    overflowed to inf for q ≥ 3)."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for q in (2, 3, 6):
+            for nu in (0.5, 1.0, q - 0.5, float(q)):
+                c = hac.hotelling_critical(nu, q)
+                assert math.isfinite(c)
+                # at its critical value the test's own p-value formula gives exactly α = 5 %
+                nu_t = max(nu, float(q))
+                assert sps.f.sf(c * (nu_t - q + 1) / (nu_t * q), q, nu_t - q + 1) == pytest.approx(0.05, rel=1e-9)
+            assert hac.hotelling_critical(0.5, q) == hac.hotelling_critical(float(q), q)
+
+
 def test_joint_design_dof_is_the_wishart_dof_of_the_cosine_estimate():
     """What η means, by Monte Carlo: for white Gaussian ε, the standardised estimate D = L(Σ_j Λ_jΛ_jᵀ)Lᵀ,
     Λ_j = (W_aᵀMε)_j over the columns a, has Σ_st var D_st = q(q + 1)/η, as a Wishart matrix with η
