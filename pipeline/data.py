@@ -265,15 +265,22 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         dt = float(src.sample_time)
         t = np.arange(n) * dt
     if plain:
-        _check_excited(ins, slice(None), f, key)
+        _check_excited(ins, slice(None), f, key, outs=outs)
     return _Part(np.asarray(t, float), dt, ins, outs, file_sha256(src.path), log)
 
 
-def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | None, where: str = "") -> None:
+def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | None, where: str = "",
+                   outs: dict[str, np.ndarray] | None = None) -> None:
+    """A constant input excites nothing; a constant output has nothing to identify (a model that holds it
+    fits with a residual of exactly zero, whose log-likelihood is not finite)."""
     for name, u in ins.items():
         if np.ptp(u[rows]) == 0:
             raise DataError(f"input {name!r} is constant{where} ({float(u[rows][0]):.10g}); a constant input excites "
                             "nothing", file=f, key=key)
+    for name, y in (outs or {}).items():
+        if np.ptp(y[rows]) == 0:
+            raise DataError(f"output {name!r} is constant{where} ({float(y[rows][0]):.10g}); a constant output "
+                            "holds nothing to identify", file=f, key=key)
 
 
 def load_record(lc: LoadedConfig) -> Record:
@@ -300,7 +307,8 @@ def load_record(lc: LoadedConfig) -> Record:
     ins = {k: cat("inputs", k) for k in parts[0].inputs}
     outs = {k: cat("outputs", k) for k in parts[0].outputs}
     est = [g for g in segments if g.role == "estimation"]
-    _check_excited(ins, slice(est[0].start, est[-1].stop), str(srcs[0].path), None, " over the estimation records")
+    _check_excited(ins, slice(est[0].start, est[-1].stop), str(srcs[0].path), None, " over the estimation records",
+                   outs=outs)
     log = [m for p in parts for m in p.log]
     log.append("records: " + "; ".join(f"{g.name} ({g.role}) rows [{g.start}, {g.stop}) from {Path(s.path).name}"
                                        for g, s in zip(segments, srcs)))

@@ -123,6 +123,8 @@ def _broken_record(kind):
         df = df.iloc[:20]
     elif kind == "constant_input":
         df["u"] = 1.5
+    elif kind == "constant_output":
+        df["x"] = 100.0
     elif kind == "missing_column":
         df = df.drop(columns=["x"])
     elif kind == "non_numeric":
@@ -140,6 +142,7 @@ RECORD_CASES = {
     "nonuniform": "non-uniform sampling",
     "too_few": "only 20 samples",
     "constant_input": "input 'u' is constant",
+    "constant_output": "output 'x' is constant",     # used to end in an internal error (log of a zero residual)
     "missing_column": "column 'x' (output) not found",
     "non_numeric": "non-numeric value 'n/a?' at row 12",
 }

@@ -98,6 +98,20 @@ def test_a_null_reused_from_the_fit_is_the_fit(setting, fid):
         np.testing.assert_array_equal(dg._sim_est(m0, dg._x0_for(fit, m0)), fit.Yhat[est])
 
 
+@pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
+def test_estimate_without_an_added_term_test(setting, fid):
+    """A likelihood-ratio screen refits its hypothesis even when the sensitivity could not be simulated
+    or was all zero (``Diagnoser.sensitivity`` returns None, so there is no Wald result to start from):
+    the family's refit must start from its null then, not fail. parameter_jump read the Wald estimate
+    unconditionally, and the heating-system record in other units ended in an internal error."""
+    from pipeline.diagnostics.engine import Candidate
+    dg, fit, ctx = setting
+    hyps = REGISTRY[fid].hypotheses(ctx)
+    for h in [h for h in hyps if h.info.get("lr_screen")][:1] or hyps[:1]:
+        f = dg.estimate(fit, Candidate(h, None, 1.0, []))
+        assert f is None or np.isfinite(f.sse_w)
+
+
 SETTLING = [f for f in FAMILY_IDS if type(REGISTRY[f]).settled is not Family.settled]
 
 

@@ -79,7 +79,8 @@ class ParameterJump(Family):
         hyp = cand.hyp
         tj_name = next(iter(hyp.extra_params))
         step = hyp.info["grid_step"]
-        d0 = float(cand.wald.beta[0])
+        # the added-term test's estimate, or 0 when there was none (its sensitivity could not be simulated)
+        d0 = float(cand.wald.beta[0]) if cand.wald is not None and len(cand.wald.beta) else 0.0
 
         def refit(tj, **fit_kw):
             h = Hypothesis(**{**hyp.__dict__, "extra_params": {tj_name: float(tj)}, "acts_from": float(tj)})
