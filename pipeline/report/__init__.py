@@ -38,12 +38,15 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
     diag, prob = ctx.diag, ctx.prob
     fits = diag.fits
     figs: dict = {}
-    jobs = [("first", lambda: figures.compare(ctx, [diag.nominal, diag.final], [labels[0], labels[-1]], units, ZOOM)),
+    # when no cause was accepted the final model is the nominal one: drawn once, not twice under one name
+    first = ([diag.nominal, diag.final], [labels[0], labels[-1]]) if len(fits) > 1 else ([diag.nominal], [labels[0]])
+    jobs = [("first", lambda: figures.compare(ctx, *first, units, ZOOM)),
             ("overview", lambda: figures.overview(ctx, units)),
-            ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)),
             ("resid", lambda: figures.residuals(ctx, [diag.nominal, diag.final] if len(fits) > 1 else [diag.nominal],
                                                 [labels[0], labels[-1]] if len(fits) > 1 else [labels[0]], units)),
             ("corr_nominal", lambda: figures.correlations(ctx, diag.nominal, alpha))]
+    if len(fits) > 1:      # with the nominal model alone it would repeat the first figure
+        jobs.insert(2, ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)))
     if len(fits) > 1:
         jobs.append(("corr_final", lambda: figures.correlations(ctx, diag.final, alpha)))
     if ctx.model.inputs:
@@ -137,4 +140,5 @@ def render_report(ctx) -> str:
             for i, n in enumerate(post.names)],
         post=post, nominal_eqs=ctx.model.describe_equations(), final_eqs=diag.final.model.describe_equations(),
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
+        n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
         band_draws=BAND_DRAWS)

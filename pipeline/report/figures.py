@@ -97,23 +97,29 @@ def compare(ctx, fits: list, labels: list[str], units: dict[str, str], zoom: int
     sl = prob.split.val_slice()
     t = prob.t[sl]
     ny = len(prob.out_names)
-    fig, axes = _fig(ny, 2, figsize=(WIDTH_IN, 2.9 * ny + 0.4), squeeze=False,
-                     gridspec_kw={"width_ratios": [2.0, 1.0]})
+    # a part no longer than the window is drawn whole at full resolution: a zoom would repeat it
+    zoomed = len(t) > zoom
+    fig, axes = _fig(ny, 2 if zoomed else 1, figsize=(WIDTH_IN, 2.9 * ny + 0.4), squeeze=False,
+                     **({"gridspec_kw": {"width_ratios": [2.0, 1.0]}} if zoomed else {}))
     for i, name in enumerate(prob.out_names):
         y = prob.Y[sl, i]
-        a, b = analysis.zoom_window(y - fits[0].Yhat[sl, i], zoom)
-        ax, az = axes[i, 0], axes[i, 1]
+        ax = axes[i, 0]
         _trace(ax, t, y, "k", "measured", measured=True)
-        az.plot(t[a:b], y[a:b], color="k", lw=1.4, label="measured", zorder=3)
         for fit, lab, col in zip(fits, labels, COLORS):
             _trace(ax, t, fit.Yhat[sl, i], col, lab)
+        ax.set_ylabel(label(name, units))
+        ax.set_xlabel("time [s]")
+        if not zoomed:
+            continue
+        a, b = analysis.zoom_window(y - fits[0].Yhat[sl, i], zoom)
+        az = axes[i, 1]
+        az.plot(t[a:b], y[a:b], color="k", lw=1.4, label="measured", zorder=3)
+        for fit, lab, col in zip(fits, labels, COLORS):
             az.plot(t[a:b], fit.Yhat[sl, i][a:b], color=col, lw=0.9, label=lab, zorder=4)
         ax.axvspan(t[a], t[b - 1], color="gold", alpha=0.25, lw=0, zorder=1)
-        ax.set_ylabel(label(name, units))
         az.set_title(f"zoom: {b - a} samples where '{labels[0]}' errs most", fontsize=8.5)
-        ax.set_xlabel("time [s]")
         az.set_xlabel("time [s]")
-    h, lab = axes[0, 1].get_legend_handles_labels()
+    h, lab = axes[0, -1].get_legend_handles_labels()
     if analysis.envelope(t, prob.Y[sl, 0]) is not None:
         h, lab = axes[0, 0].get_legend_handles_labels()
     top = 1 - 0.45 / (2.9 * ny + 0.4)

@@ -234,3 +234,39 @@ def test_a_finding_sentence_never_shows_a_bare_minus_zero():
     assert "95 % CI -0.0005 to 0.5 %" in text and "-0.0 " not in text
     assert "(50.0 % better, 95 % CI 40.0 to 60.0 %" in Diagnoser._gain_text(
         {"before": 1.0, "after": 0.5, "relative": 0.5, "ci95": [0.4, 0.6]}, -300.0)
+
+
+@pytest.mark.parametrize("n_val, panels", [(240, 1), (1000, 2)])
+def test_validation_figure_zooms_only_a_part_longer_than_the_window(monkeypatch, n_val, panels):
+    """The first figure draws the validation part whole and, beside it, a window of 400 samples where the
+    model errs most. A part of at most 400 samples (the heating system's 240) is drawn once at full
+    resolution: the zoom panel used to repeat it under a title that said "240 samples" beside a caption
+    that said 400."""
+    from types import SimpleNamespace
+    from pipeline.data import Split
+    from pipeline.report import figures
+    n = 500 + n_val
+    t = np.arange(n) * 2.0
+    y = np.sin(t / 50)[:, None]
+    prob = SimpleNamespace(t=t, Y=y, out_names=["T"], split=Split((0, 500), (500, n)))
+    fit = SimpleNamespace(Yhat=0.9 * y)
+    seen = []
+    monkeypatch.setattr(figures, "_png", lambda fig: seen.append(len(fig.axes)) or "")
+    figures.compare(SimpleNamespace(prob=prob), [fit], ["nominal"], {}, 400)
+    assert seen == [panels]
+
+
+def test_a_run_without_an_accepted_cause_draws_the_nominal_model_once(tmp_path):
+    """When no cause is accepted the final model is the nominal one: the first figure's legend named
+    "nominal" twice (two identical curves) and its caption spoke of "the nominal model and the final
+    model". One curve, and the caption says the two are the same."""
+    cfg = yaml.safe_load(DEMO.read_text())
+    cfg["diagnose"] = {"families": ["offset"], "max_findings": 0}
+    cfg["data"]["path"] = str((DEMO.parent / cfg["data"]["path"]).resolve())
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
+    html = (tmp_path / "run" / "report.html").read_text(encoding="utf-8")
+    assert "which is also the final model (no cause was accepted)" in html
+    assert "the nominal model and the final model" not in html.split('id="data"')[0]
+    # nor a second figure of the same curve ("measured vs every model" is for a chain of models)
+    assert 'alt="measured vs every model"' not in html
