@@ -261,7 +261,7 @@ def test_a_run_without_an_accepted_cause_draws_the_nominal_model_once(tmp_path):
     "nominal" twice (two identical curves) and its caption spoke of "the nominal model and the final
     model". One curve, and the caption says the two are the same."""
     cfg = yaml.safe_load(DEMO.read_text())
-    cfg["diagnose"] = {"families": ["offset"], "max_findings": 0}
+    cfg["diagnose"] = {"families": ["offset", "colored_noise", "heavy_tailed_noise"], "max_findings": 1}
     cfg["data"]["path"] = str((DEMO.parent / cfg["data"]["path"]).resolve())
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
     assert main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
@@ -270,3 +270,7 @@ def test_a_run_without_an_accepted_cause_draws_the_nominal_model_once(tmp_path):
     assert "the nominal model and the final model" not in html.split('id="data"')[0]
     # nor a second figure of the same curve ("measured vs every model" is for a chain of models)
     assert 'alt="measured vs every model"' not in html
+    # the noise families are not tested on a structure that fails its adequacy tests: the table says
+    # so, not "failed" in red
+    rows = re.findall(r"<tr><td>(?:colored_noise|heavy_tailed_noise)</td>.*?</tr>", html, flags=re.S)
+    assert len(rows) == 2 and all('<td class="r">not tested</td>' in r and ">failed<" not in r for r in rows)
