@@ -6,6 +6,8 @@ parameters and uncertainty, configuration and provenance.
 
 from __future__ import annotations
 
+import math
+
 import matplotlib.pyplot as plt
 import numpy as np
 import yaml
@@ -13,6 +15,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
+from ..fit import region_critical
 from . import analysis, figures, view
 
 ZOOM = 400              # samples in the zoom window beside a long trace
@@ -59,7 +62,7 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
                 items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, 0], u, ctx.rec.dt)))
             return figures.error_model_plot(items, ctx.model.inputs[0], prob.out_names[0], units)
         jobs.append(("error_model", emm))
-    jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal)))
+    jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal, region_critical(diag.nominal.identifiability, 2))))
     for k, fit in enumerate(fits[1:]):
         jobs.append((f"finding_{k}", lambda k=k, fit=fit: figures.compare(ctx, [fits[k], fit], [labels[k], labels[k + 1]],
                                                                           units, ZOOM)))
@@ -89,7 +92,7 @@ def _uncertainty(ctx, units: dict) -> dict:
             post = analysis.mcmc_posterior(diag.final, ctx.prob, cfg.seed)
         out["posterior"] = post
     if len(diag.fits) > 1 or post is not None:
-        out["ellipses_final"] = figures.corner(diag.final, posterior=post)
+        out["ellipses_final"] = figures.corner(diag.final, region_critical(diag.final.identifiability, 2), posterior=post)
     if post is not None and len(post.samples) >= BAND_DRAWS:
         idx = np.linspace(0, len(post.samples) - 1, BAND_DRAWS).astype(int)
         draws, what = post.samples[idx], "emcee posterior draws"
@@ -108,6 +111,16 @@ def _provenance(ctx) -> dict:
     return {"config_yaml": yaml.safe_dump(ctx.lc.canonical(), sort_keys=False, allow_unicode=True),
             "config_path": str(ctx.lc.path), "data_path": str(ctx.rec.path), "data_sha256": ctx.rec.sha256,
             "git": _git_info(), "versions": _versions()}
+
+
+def _unc_law(fit) -> dict:
+    """What the ± σ, the 95 % intervals and the ellipses of one fit rest on (:func:`pipeline.fit.region_critical`)."""
+    idf = fit.identifiability
+    nu = None if idf is None else idf.cov_dof
+    t = math.sqrt(region_critical(idf, 1))
+    return {"nu": nu, "t": t, "c2": region_critical(idf, 2),
+            "ci": [(float(v - t * sd), float(v + t * sd)) if math.isfinite(sd) else None
+                   for v, sd in zip(fit.theta, fit.std)]}
 
 
 def render_report(ctx) -> str:
@@ -141,4 +154,5 @@ def render_report(ctx) -> str:
         post=post, nominal_eqs=ctx.model.describe_equations(), final_eqs=diag.final.model.describe_equations(),
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
+        nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final),
         band_draws=BAND_DRAWS)

@@ -201,8 +201,10 @@ def error_model_plot(items: list[tuple[str, "analysis.ErrorModel"]], in_name: st
 
 
 def corner(fit, level_chi2: float = CHI2_2_95, posterior=None, title_level: str = "95 %") -> str | None:
-    """Confidence ellipses (θ−θ̂)ᵀP⁻¹(θ−θ̂) ≤ χ²₂(0.95) = 5.991 for **every** pair of estimated
-    quantities, as a lower-triangular corner plot; with ``posterior`` its draws are overlaid."""
+    """Confidence ellipses (θ−θ̂)ᵀP⁻¹(θ−θ̂) ≤ ``level_chi2`` for **every** pair of estimated quantities, as
+    a lower-triangular corner plot; with ``posterior`` its draws are overlaid. The caller passes the
+    level of the fit's covariance (:func:`pipeline.fit.region_critical`: Hotelling's T² with the sandwich's
+    degrees of freedom; χ²₂(0.95) = 5.991, the default, only for the classic covariance)."""
     n = len(fit.theta)
     if n < 2 or not np.all(np.isfinite(fit.cov)):
         return None
@@ -226,7 +228,7 @@ def corner(fit, level_chi2: float = CHI2_2_95, posterior=None, title_level: str 
             w, V = np.linalg.eigh(P)
             pts = V @ (np.sqrt(np.clip(w, 0, None) * level_chi2)[:, None] * np.vstack([np.cos(ang), np.sin(ang)]))
             ax.plot(fit.theta[i] + pts[0], fit.theta[j] + pts[1], color="tab:blue", lw=1.1,
-                    label=f"Gauss {title_level} ellipse")
+                    label=f"{title_level} confidence ellipse")
             ax.plot(fit.theta[i], fit.theta[j], "k+", ms=7)
             ax.ticklabel_format(style="sci", scilimits=(-3, 4))
             ax.locator_params(nbins=4)

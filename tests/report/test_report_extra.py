@@ -56,7 +56,8 @@ def test_mcmc_posterior_is_overlaid_and_agrees_with_gauss_on_a_near_linear_model
     assert main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")]) == 0
     html = (tmp_path / "run" / "report.html").read_text(encoding="utf-8")
     assert "emcee posterior" in html and "posterior draws (orange)" in html
-    rows = re.findall(r"<tr><td>(c|k|cubic_stiffness_v_x)</td><td class=\"n\">([-\d.e]+)</td><td class=\"n\">([-\d.e]+)</td>\s*"
+    rows = re.findall(r"<tr><td>(c|k|cubic_stiffness_v_x)</td><td class=\"n\">([-\d.e]+)</td><td class=\"n\">([-\d.e]+)</td>"
+                      r"<td class=\"n\">[^<]* to [^<]*</td>\s*"          # the 95 % interval
                       r"<td class=\"n\">([-\d.e]+)</td><td class=\"n\">([-\d.e]+)</td>", html)
     assert len(rows) == 3
     for name, est, sd, pmean, psd in rows:
