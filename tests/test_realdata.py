@@ -14,14 +14,16 @@ from tests.seedcases import require_dataset
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _analyse_shipped(tmp_path, config: str, dataset: str) -> dict:
-    """The shipped config ``configs/<config>`` run on ``../shared/datasets/<dataset>``; its summary."""
+def _analyse_shipped(tmp_path, config: str, dataset: str, ctx: bool = False):
+    """The shipped config ``configs/<config>`` run on ``../shared/datasets/<dataset>``; its summary (or
+    the whole run context with ``ctx``)."""
     path = require_dataset(dataset)
     cfg = yaml.safe_load((ROOT / "configs" / config).read_text())
     cfg["data"]["path"] = str(path)
     (tmp_path / config).write_text(yaml.safe_dump(cfg))
     with contextlib.redirect_stderr(io.StringIO()):
-        return analyse(load_config(tmp_path / config)).summary
+        run = analyse(load_config(tmp_path / config))
+    return run if ctx else run.summary
 
 
 @pytest.mark.realdata
@@ -165,7 +167,8 @@ def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
     validation residual is one slow wave). The structural Wald row must then fail adequacy, so the verdict is
     ``unexplained_discrepancy`` and the noise stage does not run (a bug let a 26 % share count as 0 %
     when the loop stopped before max_findings, and the verdict was "colored_noise")."""
-    s = _analyse_shipped(tmp_path, "cascaded_tanks.yaml", "cascaded_tanks/dataBenchmark.csv")
+    run = _analyse_shipped(tmp_path, "cascaded_tanks.yaml", "cascaded_tanks/dataBenchmark.csv", ctx=True)
+    s = run.summary
     d = s["diagnosis"]
     assert d["verdict"] in ("unexplained_discrepancy", "discrepancy")
     fams = [f["family"] for f in d["findings"]]
@@ -195,6 +198,14 @@ def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
         assert "(offset, static_nonlinearity)" in why["sentence"] and "do not say which cause" in why["sentence"]
         from pipeline.report.view import first_screen
         assert any(w.startswith("Why no cause is named:") for w in first_screen(s)["warnings"])
+        # section 4 ("Why, the fix, and its worth") holds the same answer with one row per refitted
+        # extension, not only "No finding"
+        from pipeline.report import render_report
+        sec4 = render_report(run).split('id="findings"')[1].split('id="models"')[0]
+        assert "Why no cause is named" in sec4
+        for r in why["refitted"]:
+            assert f"<code>{r['hypothesis']}</code>" in sec4
+        assert sec4.count("unbounded below</td>") == sum(r["kind"] == "unbounded" for r in why["refitted"])
 
 
 @pytest.mark.realdata
