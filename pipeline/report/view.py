@@ -178,8 +178,8 @@ def first_screen(s: dict) -> dict:
         where = diag.get("unexplained") or {}
         if where.get("failed_tests"):
             warnings.append("Where the model fails: " + "; ".join(where["failed_tests"][:3])
-                            + (f"; largest misfit in t = {sig(where['time_window_s'][0], 4)}–"
-                               f"{sig(where['time_window_s'][1], 4)} s and output range "
+                            + (f"; largest misfit of the final model on the estimation part in t = "
+                               f"{sig(where['time_window_s'][0], 4)}–{sig(where['time_window_s'][1], 4)} s and output range "
                                f"{sig(where['amplitude_range'][0], 4)} to {sig(where['amplitude_range'][1], 4)}"
                                if where.get("time_window_s") else "") + ".")
         why = (where.get("why") or {}).get("sentence")
