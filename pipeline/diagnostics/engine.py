@@ -1190,7 +1190,9 @@ class Diagnoser:
                      + f" against {g['after']:.4g}): these data do not separate them.")
         finding = {"family": "intersample", **key,
                    "description": f"{subject} {self._gain_text(g, dbic)}.{same}", "evidence": [
-                       {"test": "held_out_gain", "statistic": g["relative"], "p_value": None, "ci95": g["ci95"]}],
+                       # the one-sided p that the validation error is not lower: the test the choice is accepted by
+                       {"test": "held_out_gain", "statistic": g["relative"], "p_value": g.get("p_not_lower"),
+                        "ci95": g["ci95"]}],
                    "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations(),
                    "runners_up": runners}
         return finding

@@ -37,3 +37,6 @@ def test_intersample_switch_accepted_on_the_one_sided_test(tmp_path, base, input
     assert g["ci95"][0] <= 0 < g["relative"] and g["p_not_lower"] < engine.ONE_SIDED_LEVEL
     assert g["ci95"][0] <= g["relative"] <= g["ci95"][1]
     assert "one-sided p" in first["description"]
+    # and its evidence row carries that p-value (the report printed "p = –")
+    ev = next(e for e in first["evidence"] if e["test"] == "held_out_gain")
+    assert ev["p_value"] == g["p_not_lower"]
