@@ -266,8 +266,11 @@ def feedback_test(fit, prob, alpha: float) -> stats.TestResult | None:
     lag = int(lags[neg][int(np.argmax(np.abs(c[neg])))])
     return stats.TestResult("feedback_crosscorrelation", worst, p, None, p >= alpha,
                             f"largest input-residual correlation at negative lag {lag}"
-                            + ("" if p >= alpha else ": the input responds to the output (closed loop?); "
-                               "estimates of a misspecified model are then biased"))
+                            + ("" if p >= alpha else ": either the input responds to the output (closed "
+                               "loop; estimates of a misspecified model are then biased) or, with a coloured "
+                               "input, the misfit the input's past drives reaches negative lags through the "
+                               "input's own correlation (Silverbox's open-loop multisine does this on the "
+                               "linear model)"))
 
 
 def where_it_fails(fit, prob, tests: list[stats.TestResult]) -> dict:
