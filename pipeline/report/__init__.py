@@ -154,5 +154,5 @@ def render_report(ctx) -> str:
         post=post, nominal_eqs=ctx.model.describe_equations(), final_eqs=diag.final.model.describe_equations(),
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
-        nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final),
+        nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final), n_out=len(ctx.prob.out_names),
         band_draws=BAND_DRAWS)

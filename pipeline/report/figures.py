@@ -129,54 +129,62 @@ def compare(ctx, fits: list, labels: list[str], units: dict[str, str], zoom: int
 
 
 def residuals(ctx, fits: list, labels: list[str], units: dict[str, str]) -> str:
-    """Free-run simulation error y − ŷ over the whole record for each model."""
+    """Free-run simulation error y − ŷ over the whole record for each model, one panel per output."""
     prob = ctx.prob
-    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.6))
-    _shade(ax, prob.t, prob.split)
-    for fit, lab, col in zip(fits, labels, COLORS):
-        r = prob.Y[:, 0] - fit.Yhat[:, 0]
-        env = analysis.envelope(prob.t, r)
-        if env is None:
-            ax.plot(prob.t, r, lw=0.6, color=col, label=lab)
-        else:
-            ax.fill_between(env[0], env[1], env[2], color=col, alpha=0.45, lw=0, label=f"{lab} (min/max envelope)")
-    ax.axhline(0, color="grey", lw=0.5)
-    ax.set_ylabel(f"y − ŷ: {label(prob.out_names[0], units)}")
-    ax.set_xlabel("time [s]")
-    _legend_above(ax)
+    ny = len(prob.out_names)
+    fig, axes = _fig(ny, 1, figsize=(WIDTH_IN, 2.3 * ny + 0.3), squeeze=False, sharex=True)
+    for i, name in enumerate(prob.out_names):
+        ax = axes[i, 0]
+        _shade(ax, prob.t, prob.split)
+        for fit, lab, col in zip(fits, labels, COLORS):
+            r = prob.Y[:, i] - fit.Yhat[:, i]
+            env = analysis.envelope(prob.t, r)
+            if env is None:
+                ax.plot(prob.t, r, lw=0.6, color=col, label=lab)
+            else:
+                ax.fill_between(env[0], env[1], env[2], color=col, alpha=0.45, lw=0, label=f"{lab} (min/max envelope)")
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.set_ylabel(f"y − ŷ: {label(name, units)}")
+    axes[-1, 0].set_xlabel("time [s]")
+    _legend_above(axes[0, 0])
     return _png(fig)
 
 
 def correlations(ctx, fit, alpha: float) -> str:
     """Residual autocorrelation and input cross-correlation with their (1 − α) bounds, and the
-    Billings–Voon higher-order correlations with ±1.96/√N."""
+    Billings–Voon higher-order correlations with ±1.96/√N: one row per output, against the first input
+    (the tables hold every input–output pair)."""
     prob = ctx.prob
-    e = fit.resid_est[:, 0]
     u = prob.U[prob.split.est_slice(), 0] if ctx.model.inputs else None
-    r, bound = rstats.autocorr(e, 25, 1 - alpha)
-    fig, axes = _fig(1, 3 if u is not None else 2, figsize=(WIDTH_IN, 2.7), squeeze=False)
-    ax = axes[0, 0]
-    ax.stem(np.arange(1, 26), r[1:], basefmt=" ")
-    ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15)
-    ax.set_title(f"autocorrelation, bound ±{bound:.3g} ({100 * (1 - alpha):.0f} %)")
-    ax.set_xlabel("lag [samples]")
-    k = 1
-    if u is not None:
-        lags, c, b = rstats.crosscorr(e, u, 25, 1 - alpha)
-        ax = axes[0, 1]
-        ax.stem(lags, c, basefmt=" ")
-        ax.axhspan(-b, b, color="tab:blue", alpha=0.15)
-        ax.set_title(f"input–residual cross-corr., ±{b:.3g}")
-        ax.set_xlabel("lag [samples]")
-        k = 2
-    ho = analysis.billings_voon(e, u, 20)
-    ax = axes[0, k]
-    for (name, cur), col in zip(ho.curves.items(), COLORS):
-        ax.plot(ho.lags, cur, ".-", lw=0.8, ms=3, color=col, label=name)
-    ax.axhspan(-ho.bound, ho.bound, color="tab:blue", alpha=0.15)
-    ax.set_title(f"higher-order (Billings–Voon), ±{ho.bound:.3g}")
-    ax.set_xlabel("lag τ [samples]")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=3, frameon=False, fontsize=8.5)
+    ny = len(prob.out_names)
+    ncol = 3 if u is not None else 2
+    fig, axes = _fig(ny, ncol, figsize=(WIDTH_IN, 2.7 * ny), squeeze=False)
+    for i, name in enumerate(prob.out_names):
+        e = fit.resid_est[:, i]
+        tag = f"{name}: " if ny > 1 else ""
+        small = {"fontsize": 8.5} if ny > 1 else {}
+        r, bound = rstats.autocorr(e, 25, 1 - alpha)
+        ax = axes[i, 0]
+        ax.stem(np.arange(1, 26), r[1:], basefmt=" ")
+        ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15)
+        ax.set_title(f"{tag}autocorrelation, bound ±{bound:.3g} ({100 * (1 - alpha):.0f} %)", **small)
+        k = 1
+        if u is not None:
+            lags, c, b = rstats.crosscorr(e, u, 25, 1 - alpha)
+            ax = axes[i, 1]
+            ax.stem(lags, c, basefmt=" ")
+            ax.axhspan(-b, b, color="tab:blue", alpha=0.15)
+            ax.set_title(f"{tag}input–residual cross-corr., ±{b:.3g}", **small)
+            k = 2
+        ho = analysis.billings_voon(e, u, 20)
+        ax = axes[i, k]
+        for (hname, cur), col in zip(ho.curves.items(), COLORS):
+            ax.plot(ho.lags, cur, ".-", lw=0.8, ms=3, color=col, label=hname)
+        ax.axhspan(-ho.bound, ho.bound, color="tab:blue", alpha=0.15)
+        ax.set_title(f"{tag}higher-order (Billings–Voon), ±{ho.bound:.3g}", **small)
+    for j in range(ncol):
+        axes[-1, j].set_xlabel("lag τ [samples]" if j == ncol - 1 else "lag [samples]")
+    axes[-1, ncol - 1].legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=3, frameon=False, fontsize=8.5)
     fig.tight_layout()
     return _png(fig)
 

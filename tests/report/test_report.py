@@ -274,3 +274,27 @@ def test_a_run_without_an_accepted_cause_draws_the_nominal_model_once(tmp_path):
     # so, not "failed" in red
     rows = re.findall(r"<tr><td>(?:colored_noise|heavy_tailed_noise)</td>.*?</tr>", html, flags=re.S)
     assert len(rows) == 2 and all('<td class="r">not tested</td>' in r and ">failed<" not in r for r in rows)
+
+
+def test_residual_figures_show_every_output(monkeypatch):
+    """With two outputs the simulation-error figure and the correlation figure drew the first output
+    only (the tables had every output); now one panel (row) per output."""
+    from types import SimpleNamespace
+    from pipeline.data import Split
+    from pipeline.report import figures
+    rng = np.random.default_rng(0)
+    n = 600
+    t = np.arange(n) * 0.1
+    U = rng.standard_normal((n, 1))
+    Y = rng.standard_normal((n, 2))
+    prob = SimpleNamespace(t=t, Y=Y, U=U, out_names=["T1", "T2"], split=Split((0, 400), (400, n)))
+    fit = SimpleNamespace(Yhat=0.5 * Y, resid_est=0.5 * Y[:400])
+    ctx = SimpleNamespace(prob=prob, model=SimpleNamespace(inputs=["u"]))
+    seen = []
+    monkeypatch.setattr(figures, "_png", lambda fig: seen.append(
+        sorted(ax.get_ylabel() or ax.get_title() for ax in fig.axes if ax.get_visible())) or "")
+    figures.residuals(ctx, [fit], ["nominal"], {})
+    figures.correlations(ctx, fit, 0.01)
+    assert [lab for lab in seen[0] if lab.startswith("y − ŷ")] == ["y − ŷ: T1 [data units]", "y − ŷ: T2 [data units]"]
+    titles = seen[1]
+    assert len(titles) == 6 and sum(x.startswith("T1: ") for x in titles) == 3 and sum(x.startswith("T2: ") for x in titles) == 3
