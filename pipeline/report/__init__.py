@@ -57,10 +57,13 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
         u = prob.U[es, 0]
 
         def emm():
-            items = [(labels[0], analysis.error_model(diag.nominal.resid_est[:, 0], u, ctx.rec.dt))]
-            if len(fits) > 1:
-                items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, 0], u, ctx.rec.dt)))
-            return figures.error_model_plot(items, ctx.model.inputs[0], prob.out_names[0], units)
+            rows = []
+            for i, out in enumerate(prob.out_names):    # one panel per output, from the first input
+                items = [(labels[0], analysis.error_model(diag.nominal.resid_est[:, i], u, ctx.rec.dt))]
+                if len(fits) > 1:
+                    items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, i], u, ctx.rec.dt)))
+                rows.append((out, items))
+            return figures.error_model_plot(rows, ctx.model.inputs[0], units)
         jobs.append(("error_model", emm))
     jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal, region_critical(diag.nominal.identifiability, 2))))
     for k, fit in enumerate(fits[1:]):

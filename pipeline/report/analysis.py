@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+from scipy.signal import welch
 
 from .. import progress
 
@@ -89,23 +90,37 @@ class ErrorModel:
 
 def error_model(e: np.ndarray, u: np.ndarray, dt: float, order: int = 30, n_freq: int = 256) -> ErrorModel | None:
     """Model-error model (Ljung 1999, *System Identification*, §16.6 "model error models"): an FIR
-    model e_k = Σ_{j=0}^{n−1} b_j u_{k−j} + v_k of the residual on the input, fitted by least squares;
-    its frequency response G(f) = Σ b_j e^{−i2πf j Δt} with a 99 % band (cov(b̂) = σ̂²(ΦᵀΦ)⁻¹, delta
-    method for |G|). A band that contains 0 at every frequency says the residual holds no more input
+    model e_k = Σ_{j=0}^{n−1} b_j u_{k−j} + v_k of the residual on the input, on the input lags'
+    well-determined directions, by the added-term test's FGLS; its frequency response
+    G(f) = Σ b_j e^{−i2πf j Δt} with a pointwise 99 % band (the test's HAC covariance of b̂, delta method
+    for |G|). A band that contains 0 at every frequency says the residual holds no more input
     dynamics."""
     n = len(e)
     if n <= 4 * order or np.ptp(u) == 0:
         return None
     Phi = np.column_stack([u[order - 1 - j:n - j] for j in range(order)])
     y = e[order - 1:]
-    b, *_ = np.linalg.lstsq(Phi, y, rcond=None)
-    r = y - Phi @ b
-    s2 = float(r @ r) / max(len(y) - order, 1)
-    C = s2 * np.linalg.pinv(Phi.T @ Phi)
-    # only where the input has power: above it the FIR response is not identifiable (ill-conditioned)
-    U = np.abs(np.fft.rfft(u - u.mean())) ** 2
-    cum = np.cumsum(U) / max(float(U.sum()), 1e-300)
-    f_max = max(float(np.fft.rfftfreq(n, dt)[min(int(np.searchsorted(cum, 0.999)), len(cum) - 1)]), 2.0 / (n * dt))
+    # a smooth input makes its lags nearly collinear: the coefficients and their covariance on the
+    # same well-determined directions (σ_i > 10⁻⁶ σ_max, as adequacy.model_error_model tests them).
+    # Before, lstsq kept every direction while pinv(ΦᵀΦ) dropped the weak ones, so on a band-limited
+    # input |G| reached 10⁵ above the band with a 99 % band of width 0 there.
+    # The coefficients and their covariance are those of the adequacy row's test (FGLS with the HAC
+    # long-run covariance, :func:`pipeline.diagnostics.stats.added_terms_test`): σ̂²(ΦᵀΦ)⁻¹ assumed a
+    # white residual, and an output-error residual is smooth (the heating system's lag-1 correlation
+    # is 0.99), so its band was far too narrow.
+    Uo, sv, Vt = np.linalg.svd(Phi, full_matrices=False)
+    keep = sv > 1e-6 * sv[0]
+    Vk = Vt[keep].T / sv[keep]
+    from ..diagnostics.stats import added_terms_test
+    w = added_terms_test(y - y.mean(), np.zeros((len(y), 0)), Uo[:, keep])
+    b = Vk @ w.beta
+    C = Vk @ w.cov @ Vk.T
+    # only where the input has power: within 30 dB of its Welch spectrum's peak (Hann, 50 % overlap);
+    # beyond, the FIR response is not identifiable (the cumulative-power rule used before reached
+    # twice the band edge of a band-limited input through the periodogram's leakage)
+    seg = int(min(256, max(16, n // 4)))
+    fw, pw = welch(u - u.mean(), fs=1.0 / dt, nperseg=seg)
+    f_max = max(float(fw[pw >= 1e-3 * float(pw.max())].max()) if pw.max() > 0 else 0.0, 2.0 / (n * dt))
     f = np.linspace(0, min(f_max, 0.5 / dt), n_freq)
     E = np.exp(-2j * np.pi * f[:, None] * dt * np.arange(order)[None, :])
     G = E @ b
