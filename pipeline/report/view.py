@@ -98,6 +98,14 @@ def recommendation(s: dict) -> dict:
     return out
 
 
+def _fit_text(v: dict) -> str:
+    """"F % (RMSE R)", or per output "F1 % on y1 (RMSE R1), F2 % on y2 (RMSE R2)" when there are several."""
+    per = v.get("per_output") or {}
+    if len(per) > 1:
+        return ", ".join(f"{sig(o['fit_percent'], 3)} % on {name} (RMSE {sig(o['rmse_sim'])})" for name, o in per.items())
+    return f"{sig(v.get('fit_percent'), 3)} % (RMSE {sig(v.get('rmse_sim'))})"
+
+
 def first_screen(s: dict) -> dict:
     """Sentences of the first screen, and warnings."""
     nom = (s.get("nominal") or {}).get("validation") or {}
@@ -112,7 +120,14 @@ def first_screen(s: dict) -> dict:
                else "the validation part")
     nf = nom.get("fit_percent")
     lines = []
-    if nf is not None:
+    per = nom.get("per_output") or {}
+    if len(per) > 1:
+        # several outputs: each in its own scale (a pooled fit or RMSE would mix their units)
+        lines.append(f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
+                     "model misses " + ", ".join(f"{sig(100 - v['fit_percent'], 3)} % of {name}'s variation "
+                                                 f"(fit {sig(v['fit_percent'], 3)} %, RMSE {sig(v['rmse_sim'])})"
+                                                 for name, v in per.items()) + ".")
+    elif nf is not None:
         miss = 100 - nf
         lines.append(f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
                      f"model misses {sig(miss, 3)} % of the output's variation (fit {sig(nf, 3)} %, "
@@ -126,6 +141,9 @@ def first_screen(s: dict) -> dict:
         cause = f"{f0.get('family')}" + (f" in the equation of {where}" if f0.get("equation") else
                                          (f" on output {where}" if where else "")) + (f" ({term})" if term else "")
         partial = verdict == "unexplained_discrepancy"
+        # several outputs: the gain is on each output's RMSE over its standard deviation, pooled
+        err = ("error (each output's RMSE over its standard deviation, pooled)"
+               if g.get("metric") == "validation_nrmse_sim_pooled" else "RMSE")
         # with the verdict unexplained the findings explain part of the misfit only: not "the cause"
         gg = f0.get("gain_given")
         tied = ", ".join(str(t.get("hypothesis")) for t in f0.get("tied_with") or [])
@@ -140,14 +158,14 @@ def first_screen(s: dict) -> dict:
             their = "their " if ", " in str(gg.get("with")) else f"{gg.get('with')}'s "
             alone = ("–" if rel is None else
                      f"{'lowers' if rel >= 0 else 'raises'} it by {sig(abs(100 * rel), 3)} %")
-            lines.append(f"{head} With {gg.get('with')} in the model too, adding it lowers the validation RMSE by "
+            lines.append(f"{head} With {gg.get('with')} in the model too, adding it lowers the validation {err} by "
                          f"{sig(100 * gg['relative'], 3)} % (95 % interval {sig(100 * gg['ci95'][0], 3)} to "
                          f"{sig(100 * gg['ci95'][1], 3)} % for this validation input). Alone it {alone} (95 % "
                          f"interval of the gain {interval})" + (
                              "." if ci[0] is not None and ci[0] > 0 else
                              f", an interval not above 0: {their}misfit was still in the validation residual."))
         else:
-            lines.append(f"{head} Adding it lowers the validation RMSE by "
+            lines.append(f"{head} Adding it lowers the validation {err} by "
                          f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
                          f"{interval} for this validation input"
                          + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
@@ -155,10 +173,9 @@ def first_screen(s: dict) -> dict:
         if len(findings) > 1:
             lines.append(f"{plural(len(findings), 'partial finding' if partial else 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)
-                         + f"; with all of them the fit is {sig(fin.get('fit_percent'), 3)} % "
-                           f"(RMSE {sig(fin.get('rmse_sim'))}).")
+                         + f"; with all of them the fit is {_fit_text(fin)}.")
         else:
-            lines.append(f"With it the fit is {sig(fin.get('fit_percent'), 3)} % (RMSE {sig(fin.get('rmse_sim'))}).")
+            lines.append(f"With it the fit is {_fit_text(fin)}.")
     elif verdict == "no_significant_discrepancy":
         lines.append("No effect family explains the residual: the nominal model is adequate at the tested "
                      f"level α = {diag.get('alpha')}.")

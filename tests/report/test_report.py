@@ -101,6 +101,23 @@ def test_first_screen_says_how_much_is_missed_the_cause_and_the_gain():
     assert fs["warnings"] == []
 
 
+def test_first_screen_states_each_outputs_fit_in_its_own_scale():
+    """Two outputs (a temperature and a position, say): the pooled fit % and RMSE mix their units, and
+    the gain is on each output's RMSE over its standard deviation, pooled. The first screen gives each
+    output's fit and RMSE and says what the gain is on."""
+    per_n = {"T": {"fit_percent": 70.0, "rmse_sim": 3.0}, "x": {"fit_percent": 90.0, "rmse_sim": 0.002}}
+    per_f = {"T": {"fit_percent": 95.0, "rmse_sim": 0.5}, "x": {"fit_percent": 96.0, "rmse_sim": 0.0008}}
+    s = _summary(80.0, 95.5)
+    s["nominal"]["validation"]["per_output"] = per_n
+    s["final"]["validation"]["per_output"] = per_f
+    s["diagnosis"]["findings"][0]["gain"]["metric"] = "validation_nrmse_sim_pooled"
+    text = " ".join(view.first_screen(s)["lines"])
+    assert "misses 30 % of T's variation (fit 70 %, RMSE 3)" in text and "10 % of x's variation (fit 90 %" in text
+    assert "80 %" not in text                        # no pooled fit
+    assert "95 % on T (RMSE 0.5), 96 % on x (RMSE 8.000e-4)" in text or "96 % on x" in text
+    assert "each output's RMSE over its standard deviation, pooled" in text
+
+
 def test_first_screen_gives_a_look_ahead_finding_its_gain_given_the_other():
     s = _summary(62.39, 99.9)
     f0 = s["diagnosis"]["findings"][0]
