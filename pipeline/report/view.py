@@ -78,8 +78,10 @@ def recommendation(s: dict) -> dict:
     w = _cv_winner(s)
     out = {"model": diag_name, "kind": "diagnosis", "rmse": d_rmse, "fit": d_fit, "text": "", "cv": w}
     if w is None or w.get("validation_rmse_sim") is None or d_rmse is None:
-        out["text"] = (f"Use the diagnosis loop's model {diag_name}: validation free-run RMSE {sig(d_rmse)}, "
-                       f"fit {sig(d_fit, 3)} %.")
+        per = (final.get("validation") or {}).get("per_output") or {}
+        out["text"] = (f"Use the diagnosis loop's model {diag_name}: validation free-run "
+                       + (f"fit {_fit_text(final.get('validation') or {})}." if len(per) > 1 else
+                          f"RMSE {sig(d_rmse)}, fit {sig(d_fit, 3)} %."))
         return out
     c_rmse = w["validation_rmse_sim"]
     cname = f"{w['name']} ({w.get('estimator')})"

@@ -116,6 +116,7 @@ def test_first_screen_states_each_outputs_fit_in_its_own_scale():
     assert "80 %" not in text                        # no pooled fit
     assert "95 % on T (RMSE 0.5), 96 % on x (RMSE 8.000e-4)" in text or "96 % on x" in text
     assert "each output's RMSE over its standard deviation, pooled" in text
+    assert view.recommendation(s)["text"].endswith("validation free-run fit 95 % on T (RMSE 0.5), 96 % on x (RMSE 8.000e-4).")
 
 
 def test_first_screen_gives_a_look_ahead_finding_its_gain_given_the_other():
