@@ -15,6 +15,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
+from ..diagnostics.adequacy import FIR_ORDER
 from ..fit import region_critical
 from . import analysis, figures, view
 
@@ -158,4 +159,5 @@ def render_report(ctx) -> str:
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
         nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final), n_out=len(ctx.prob.out_names),
+        fir_order=FIR_ORDER,
         band_draws=BAND_DRAWS)
