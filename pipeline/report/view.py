@@ -100,6 +100,32 @@ def recommendation(s: dict) -> dict:
     return out
 
 
+def _key_text(f: dict) -> str:
+    """The finding's key parameter (contract §2) in a few words, for the first screen: what a reader
+    needs to act on it (a delay of how long, a limit at what level, a jump of what and when)."""
+    g = f.get
+    fam = g("family")
+    if fam == "input_delay" and g("delay_s") is not None:
+        return f"{sig(g('delay_s'), 3)} s" + (f" ({sig(g('delay_samples'), 2)} samples)" if g("delay_samples") is not None else "")
+    if fam == "unmodeled_dynamics" and g("time_constant_s") is not None:
+        return f"time constant {sig(g('time_constant_s'), 3)} s" + (f" on input {g('input')}" if g("input") else "")
+    if fam == "input_saturation" and g("limit") is not None:
+        return f"{g('input') or 'the input'} clipped at ±{sig(g('limit'), 3)}"
+    if fam == "state_saturation" and g("limit") is not None:
+        return f"{g('state') or 'a state'} stops at {sig(g('limit'), 3)}"
+    if fam == "dead_zone" and g("width") is not None:
+        return f"width {sig(g('width'), 3)}" + (f" on input {g('input')}" if g("input") else "")
+    if fam == "periodic_disturbance" and g("frequency_hz") is not None:
+        return f"{sig(g('frequency_hz'), 4)} Hz"
+    if fam == "parameter_jump" and g("time_s") is not None:
+        return f"{g('parameter')} from {sig(g('before'), 3)} to {sig(g('after'), 3)} at t = {sig(g('time_s'), 4)} s"
+    if fam == "parameter_drift" and g("rate_per_s") is not None:
+        return f"{g('parameter')} drifting by {sig(100 * g('rate_per_s'), 3)} % of its value per s"
+    if fam == "intersample" and g("chosen"):
+        return f"{g('chosen')} instead of the configured {g('configured')}"
+    return ""
+
+
 def _fit_text(v: dict) -> str:
     """"F % (RMSE R)", or per output "F1 % on y1 (RMSE R1), F2 % on y2 (RMSE R2)" when there are several."""
     per = v.get("per_output") or {}
@@ -142,6 +168,9 @@ def first_screen(s: dict) -> dict:
         term = f0.get("term")
         cause = f"{f0.get('family')}" + (f" in the equation of {where}" if f0.get("equation") else
                                          (f" on output {where}" if where else "")) + (f" ({term})" if term else "")
+        key = _key_text(f0)
+        if key:
+            cause += f", {key}"
         partial = verdict == "unexplained_discrepancy"
         # several outputs: the gain is on each output's RMSE over its standard deviation, pooled
         err = ("error (each output's RMSE over its standard deviation, pooled)"

@@ -119,6 +119,22 @@ def test_first_screen_states_each_outputs_fit_in_its_own_scale():
     assert view.recommendation(s)["text"].endswith("validation free-run fit 95 % on T (RMSE 0.5), 96 % on x (RMSE 8.000e-4).")
 
 
+@pytest.mark.parametrize("finding, words", [
+    ({"family": "input_delay", "delay_s": 0.2189, "delay_samples": 2.736}, "input_delay, 0.219 s (2.7 samples)."),
+    ({"family": "parameter_jump", "parameter": "k", "time_s": 12.5, "before": 4.0, "after": 5.2},
+     "parameter_jump, k from 4 to 5.2 at t = 12.5 s."),
+    ({"family": "parameter_drift", "parameter": "c", "rate_per_s": 0.004}, "c drifting by 0.4 % of its value per s"),
+    ({"family": "input_saturation", "input": "u", "limit": 1.5}, "input_saturation, u clipped at ±1.5."),
+    ({"family": "unmodeled_dynamics", "input": "u", "time_constant_s": 0.084}, "time constant 0.084 s on input u"),
+])
+def test_first_screen_names_the_key_parameter(finding, words):
+    """The dryer's first screen said "Largest partial finding: input_delay." without the delay; the
+    key parameter (contract §2) is what a reader acts on."""
+    s = _summary(60.0, 90.0)
+    s["diagnosis"]["findings"] = [{**finding, "gain": {"relative": 0.5, "ci95": [0.4, 0.6]}}]
+    assert words in " ".join(view.first_screen(s)["lines"])
+
+
 def test_first_screen_gives_a_look_ahead_finding_its_gain_given_the_other():
     s = _summary(62.39, 99.9)
     f0 = s["diagnosis"]["findings"][0]
