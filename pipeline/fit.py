@@ -331,6 +331,14 @@ def region_critical(idf: Identifiability | None, q: int, level: float = 0.95) ->
     return hotelling_critical(float(nu), q, 1.0 - level)
 
 
+def param_intervals(fit: "FitResult", level: float = 0.95) -> list[tuple[float, float] | None]:
+    """Per parameter the interval θ̂ ± t·σ, t = √:func:`region_critical` (q = 1: Student's t with the
+    covariance's degrees of freedom); None where σ is not finite (an unidentifiable parameter)."""
+    t = math.sqrt(region_critical(fit.identifiability, 1, level))
+    return [(float(v - t * sd), float(v + t * sd)) if math.isfinite(sd) else None
+            for v, sd in zip(fit.theta, np.asarray(fit.std, float))]
+
+
 def score_rows(J: np.ndarray, r: np.ndarray, ny: int) -> np.ndarray:
     """Per-sample score rows g_t = Σ_o J_{(t,o)} r_{(t,o)} (N×p) of a residual raveled sample-major
     (row t·ny + o), the quantity whose long-run covariance the sandwich needs (Ljung 1999 §9.3)."""

@@ -13,7 +13,6 @@ config on the same data are byte-identical.
 from __future__ import annotations
 
 import hashlib
-import math
 import json
 import os
 import platform
@@ -24,7 +23,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from . import __version__
@@ -36,7 +34,7 @@ from .data import Record, Split, apply_prefilters, file_sha256, load_record, mak
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
 from .diagnostics.why import why_unexplained
-from .fit import FitResult, Problem, at_bounds, equation_error_start, region_critical
+from .fit import FitResult, Problem, at_bounds, equation_error_start, param_intervals
 from .extended import extended_config
 from .model import Model
 from .runfolder import check_target, finalize, kill_point, make_temp, publish
@@ -61,11 +59,9 @@ class RunContext:
 def model_block(fit: FitResult, prob: Problem) -> dict:
     sl = prob.split.val_slice()
     r = val_resid(fit, prob)
-    half = math.sqrt(region_critical(fit.identifiability, 1)) * np.asarray(fit.std, float)
     return {"params": dict(zip(fit.names, fit.theta)), "param_std": dict(zip(fit.names, fit.std)),
-            # 95 % intervals θ̂ ± t_ν σ with the covariance's own degrees of freedom (fit.region_critical)
-            "param_ci95": {n: ([float(v - h), float(v + h)] if math.isfinite(h) else None)
-                           for n, v, h in zip(fit.names, fit.theta, half)},
+            # 95 % intervals θ̂ ± t_ν σ with the covariance's own degrees of freedom (fit.param_intervals)
+            "param_ci95": {n: (list(ci) if ci else None) for n, ci in zip(fit.names, param_intervals(fit))},
             "estimation": {"rmse_sim": rmse(fit.resid_est),
                            "fit_percent": fit_percent(prob.Y[prob.split.est_slice()],
                                                       fit.Yhat[prob.split.est_slice()])},

@@ -439,6 +439,13 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
     J = np.asarray(J, float).reshape(len(e), -1)
     share = None
     back = None          # (q × k) map from the determined directions' coefficients to S's columns
+
+    def off_J(X: np.ndarray) -> np.ndarray:
+        """X projected off J's columns (on ``basis`` when given)."""
+        if basis is not None:
+            return X - basis @ (basis.T @ X)
+        return X - J @ np.linalg.lstsq(J, X, rcond=None)[0] if J.size else X
+
     S0 = None            # S projected off J's columns, computed once
     if J.size and S.size:
         # a direction of S that J already produces (an output gain beside a free input gain) leaves a
@@ -447,7 +454,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
         # determined directions are tested (:func:`determined`), S itself when all of them are. Their
         # coefficients are mapped back to S's columns (S⊥V_k = U_kΣ_k, so β = V_k β_k, the minimum-norm
         # coefficients, and cov = V_k cov_k V_kᵀ), so callers read β and cov column by column as before
-        S0 = S - basis @ (basis.T @ S) if basis is not None else S - J @ np.linalg.lstsq(J, S, rcond=None)[0]
+        S0 = off_J(S)
         u, sv, vt, keep = _kept_directions(S, S0)
         if not keep.all():
             q0 = S.shape[1]
@@ -459,10 +466,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
         # the unrestricted OLS residual filters e, J and S alike, so the long-run variance below is that
         # of nearly white scores and keeps its degrees of freedom when the residual is very smooth
         if S0 is None:
-            if basis is not None:
-                S0 = S - basis @ (basis.T @ S)
-            else:
-                S0 = S - J @ np.linalg.lstsq(J, S, rcond=None)[0] if J.size else S
+            S0 = off_J(S)
         eu0 = e - S0 @ np.linalg.lstsq(S0, e, rcond=None)[0]
         e0 = float(e @ e)
         share = float(1.0 - float(eu0 @ eu0) / e0) if e0 > 0 else 0.0

@@ -16,7 +16,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
 from ..diagnostics.adequacy import FIR_ORDER
-from ..fit import region_critical
+from ..fit import param_intervals, region_critical
 from . import analysis, figures, view
 
 ZOOM = 400              # samples in the zoom window beside a long trace
@@ -49,9 +49,8 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
             ("resid", lambda: figures.residuals(ctx, [diag.nominal, diag.final] if len(fits) > 1 else [diag.nominal],
                                                 [labels[0], labels[-1]] if len(fits) > 1 else [labels[0]], units)),
             ("corr_nominal", lambda: figures.correlations(ctx, diag.nominal, alpha))]
-    if len(fits) > 1:      # with the nominal model alone it would repeat the first figure
+    if len(fits) > 1:      # with the nominal model alone these would repeat the figures above
         jobs.insert(2, ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)))
-    if len(fits) > 1:
         jobs.append(("corr_final", lambda: figures.correlations(ctx, diag.final, alpha)))
     if ctx.model.inputs:
         es = prob.split.est_slice()
@@ -121,10 +120,8 @@ def _unc_law(fit) -> dict:
     """What the ± σ, the 95 % intervals and the ellipses of one fit rest on (:func:`pipeline.fit.region_critical`)."""
     idf = fit.identifiability
     nu = None if idf is None else idf.cov_dof
-    t = math.sqrt(region_critical(idf, 1))
-    return {"nu": nu, "t": t, "c2": region_critical(idf, 2),
-            "ci": [(float(v - t * sd), float(v + t * sd)) if math.isfinite(sd) else None
-                   for v, sd in zip(fit.theta, fit.std)]}
+    return {"nu": nu, "t": math.sqrt(region_critical(idf, 1)), "c2": region_critical(idf, 2),
+            "ci": param_intervals(fit)}
 
 
 def render_report(ctx) -> str:

@@ -149,16 +149,14 @@ def first_screen(s: dict) -> dict:
     nf = nom.get("fit_percent")
     lines = []
     per = nom.get("per_output") or {}
+    opening = f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal model misses "
     if len(per) > 1:
         # several outputs: each in its own scale (a pooled fit or RMSE would mix their units)
-        lines.append(f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
-                     "model misses " + ", ".join(f"{sig(100 - v['fit_percent'], 3)} % of {name}'s variation "
-                                                 f"(fit {sig(v['fit_percent'], 3)} %, RMSE {sig(v['rmse_sim'])})"
-                                                 for name, v in per.items()) + ".")
+        lines.append(opening + ", ".join(f"{sig(100 - v['fit_percent'], 3)} % of {name}'s variation "
+                                         f"(fit {sig(v['fit_percent'], 3)} %, RMSE {sig(v['rmse_sim'])})"
+                                         for name, v in per.items()) + ".")
     elif nf is not None:
-        miss = 100 - nf
-        lines.append(f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
-                     f"model misses {sig(miss, 3)} % of the output's variation (fit {sig(nf, 3)} %, "
+        lines.append(opening + f"{sig(100 - nf, 3)} % of the output's variation (fit {sig(nf, 3)} %, "
                      f"RMSE {sig(nom.get('rmse_sim'))}).")
     if findings:
         f0 = findings[0]
