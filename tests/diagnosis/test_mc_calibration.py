@@ -385,6 +385,45 @@ def test_design_correction_equals_its_definition():
     assert nu[0] == pytest.approx(np.trace(C) ** 2 / np.sum(C * C), rel=1e-10)
 
 
+def test_design_correction_with_many_cosines_equals_its_definition():
+    """From hac.TRACE_FFT_FROM cosines on, tr C² is computed without the B×B matrix (prefix sums and
+    FFTs); it must still equal the definition built from explicit matrices."""
+    rng = np.random.default_rng(22)
+    n, b = 700, 300
+    assert b >= hac.TRACE_FFT_FROM
+    x = _ar(rng, 0.9, (n, 4), 100)
+    s = np.column_stack([x[:, 0] + 0.3 * rng.standard_normal(n), _ar(rng, 0.99, n, 100)])
+    t = (np.arange(n) + 0.5) / n
+    M = np.eye(n) - x @ np.linalg.pinv(x)
+    kap, nu = hac.design_terms(x, s, b)
+    for a in range(2):
+        W = (np.cos(np.pi * np.outer(np.arange(1, b + 1), t)) * math.sqrt(2.0 / n) * s[:, a]).T
+        C = W.T @ M @ W
+        assert kap[a] == pytest.approx(np.trace(C) / np.trace(W.T @ W), rel=1e-10)
+        assert nu[a] == pytest.approx(np.trace(C) ** 2 / np.sum(C * C), rel=1e-10)
+
+
+def test_trace_c2_falls_back_when_the_projection_removes_nearly_everything(monkeypatch):
+    """When (Wᵀq)(Wᵀq)ᵀ nearly equals WᵀW the three-term difference cancels (1 % wrong here without the
+    guard); the explicit form is used then."""
+    rng = np.random.default_rng(23)
+    b = 200
+    y = np.concatenate([[1.0], 0.8 ** np.arange(1, 3 * b)])
+    i = np.arange(b)
+    wtw = y[np.abs(i[:, None] - i[None, :])] + y[i[:, None] + i[None, :] + 2]
+    lam, V = np.linalg.eigh(wtw)
+    wq = V * np.sqrt(np.maximum(lam, 0.0) * (1.0 - 1e-7))               # wq wqᵀ = (1 − 10⁻⁷) WᵀW
+    c = wtw - wq @ wq.T
+    exact = float(np.sum(c * c))
+    assert abs(hac._trace_c2(y, b, wq) / exact - 1.0) < 1e-9
+    with monkeypatch.context() as m:
+        m.setattr(hac, "TRACE_CANCEL", -np.inf)
+        assert abs(hac._trace_c2(y, b, wq) / exact - 1.0) > 1e-4
+    wq2 = rng.standard_normal((b, 3))                                  # and the ordinary case
+    c2 = wtw - wq2 @ wq2.T
+    assert abs(hac._trace_c2(y, b, wq2) / float(np.sum(c2 * c2)) - 1.0) < 1e-12
+
+
 def _explicit_cosine_designs(x, s, b):
     """W_a = [cos_j ⊙ s_a]_j (N×B) for every column a of s, and M = I − x x⁺, built explicitly."""
     n = x.shape[0]
