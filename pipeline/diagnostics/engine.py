@@ -1022,10 +1022,11 @@ class Diagnoser:
     def _equation_error_evidence(self, fit: FitResult, hyp) -> dict | None:
         """When every state is measured: regress the equation error ẋ − f(x, u; θ̂) of the hypothesis'
         equation (ẋ by a Savitzky–Golay derivative, window 7, order 2) on the candidate term evaluated
-        on the measured states; HAC Wald test of the slope (intercept partialled out)."""
+        on the measured states; HAC Wald test of the slope (intercept partialled out). Not for a term of a
+        new (unmeasured) state."""
         m = fit.model
         prob = self.prob
-        if hyp.equation is None or m.extra_states or not all(st in prob.out_names for st in m.states):
+        if hyp.equation is None or m.extra_states or hyp.extra_states or not all(st in prob.out_names for st in m.states):
             return None
         from scipy.signal import savgol_filter
         sl = prob.split.est_slice()

@@ -225,6 +225,35 @@ def unmodeled_dynamics(ctx: Ctx) -> Effect:
                           "what": "first-order actuator lag"}, apply=apply)
 
 
+NODE_TAU = (0.5, 3.0)         # × the base's fastest time constant: the range a second storage's τ is drawn from
+
+
+def unmodeled_state(ctx: Ctx) -> Effect:
+    """A second storage coupled to the state s of the force equation (a second thermal mass, a
+    compliant mount): z' = (s − z)/τ, s' gains c·(z − s). τ drawn log-uniformly from ``NODE_TAU`` × tc;
+    c sized on the pilot like the additive families, with (z − s) from the pilot's s through the lag
+    (exact for s held between samples), and positive (a passive exchange: s is pulled towards z)."""
+    b = ctx.base
+    s = b.force_eq
+    i, n = b.index(s), len(b.states)
+    tau = float(b.tc * math.exp(ctx.rng.uniform(math.log(NODE_TAU[0]), math.log(NODE_TAU[1]))))
+    xs = ctx.x(s)
+    g = 1.0 - math.exp(-b.dt / tau)
+    zp = np.empty_like(xs)
+    zp[0] = xs[0]
+    for k in range(1, len(xs)):
+        zp[k] = zp[k - 1] + g * (xs[k - 1] - zp[k - 1])
+    c = _scaled(ctx, s, zp - xs)
+
+    def apply(pl: Plant) -> None:
+        pl.extra_x0 = [float(b.initial()[i])]
+        pl.extra = lambda t, x, z, u_raw, p: np.array([(x[i] - z[0]) / tau])
+        pl.additive.append(_add(i, n, lambda t, x, z, u, p: c * (z[0] - x[i])))
+    return Effect("unmodeled_dynamics", acts_on={"equation": s},
+                  params={"time_constant_s": tau, "added_order": 1, "equation": s, "coupling": c,
+                          "what": "a second storage coupled to the state of the force equation"}, apply=apply)
+
+
 # ------------------------------------------------------------------ parameters in time
 JUMP_FACTOR = (1.15, 1.35, 1.8)
 DRIFT_CHANGE = (0.1, 0.25, 0.6)   # relative change over the record
@@ -472,6 +501,9 @@ def output_offset(ctx: Ctx) -> Effect:
 
 
 FAMILIES["output_offset"] = output_offset
+# a second form of unmodeled_dynamics (a missing state coupled to a state, not an input lag), last in
+# the menu so that the bench grid's rotation of the earlier records is unchanged
+FAMILIES["unmodeled_state"] = unmodeled_state
 
 # which bases each kind is physically sensible on
 ZERO_MEAN = tuple(n for n, b in BASES.items() if b.u_mean == 0.0)
@@ -483,7 +515,7 @@ SUPPORTED: dict[str, tuple[str, ...]] = {
     "quadratic_damping": WITH_VEL, "coulomb_friction": WITH_VEL,
     "static_nonlinearity": ("tank", "msd", "dcmotor", "mimo"), "periodic_disturbance": ALL,
     "input_delay": ALL, "input_saturation": ALL, "dead_zone": ZERO_MEAN, "parameter_jump": ALL,
-    "parameter_drift": ALL, "unmodeled_dynamics": ALL, "state_saturation": ("tank", "msd"),
+    "parameter_drift": ALL, "unmodeled_dynamics": ALL, "unmodeled_state": ALL, "state_saturation": ("tank", "msd"),
     "colored_noise": ALL, "heavy_tailed_noise": ALL, "heteroscedastic_noise": ALL, "intersample": ALL,
     "backlash": ("msd", "pendulum", "dcmotor"), "hysteresis": ("msd",), "wrong_order": ("msd", "dcmotor", "tank"),
     "xexp": ("msd", "pendulum"), "sensor_law": ("msd", "pendulum", "tank"),
