@@ -210,11 +210,14 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
 
 
 def _tried(history: list[dict]) -> list[dict]:
-    """Per family, the last reason it was not (or was) taken, from the diagnosis history."""
+    """Per family, the last reason it was not (or was) taken, from the diagnosis history; "accepted"
+    once any of its candidates was (a later round's "not significant" of its remaining hypotheses does
+    not undo a finding)."""
     out: dict[str, str] = {}
     for it in history:
         for c in it.get("candidates", []):
-            out[c["family"]] = c.get("reason") or ""
+            if out.get(c["family"]) != "accepted":
+                out[c["family"]] = c.get("reason") or ""
         for sk in it.get("skipped", []):
             out.setdefault(sk["family"], sk["reason"])
     return [{"family": f, "reason": r} for f, r in out.items()]

@@ -820,13 +820,14 @@ class Diagnoser:
           2 %). Not on a long record (:meth:`_long`; Silverbox: 4 s more for the same findings), where
           the representative and its near tie stand for the family as before;
         * after a representative's refit failed from every start (it diverged, or ended above the
-          current model's error), the next ones explaining at least ``FALLBACK_SHARE`` of its share, at
+          current model's error), or its family rejected the refitted form ("refit rejected": a
+          coupled state faster than the samples), the next ones explaining at least ``FALLBACK_SHARE`` of its share, at
           most ``MAX_FALLBACKS``: the first-ranked hypothesis can be one that cannot be simulated (c·h²
           with c > 0 runs away on that tank)."""
         out = []
         for c in todo:
             forms = REGISTRY[c.hyp.family].refit_alternates
-            failed = c.fit is None and c.reason.startswith("refit failed")
+            failed = c.fit is None and c.reason.startswith(("refit failed", "refit rejected"))
             if failed and not forms:
                 alts = [(h2, w2) for h2, w2 in c.alternates
                         if w2.r2 >= self.FALLBACK_SHARE * c.wald.r2][:self.MAX_FALLBACKS]

@@ -62,6 +62,31 @@ class UnmodeledDynamics(Family):
                     info={"kind": "coupled_state", "state": z, "tau_name": tau, "x0": x0}))
         return out
 
+    def estimate(self, dg, fit, cand):
+        """The generic refit; a coupled state is then kept only where it is one: a time constant of at
+        least half a sample (a faster one rescales the equation's time derivative, c·(z − s) ≈ −cτ·s',
+        which the samples cannot tell from the equation's own parameters: the DaISy dryer refitted
+        τ = 0.09 samples with cτ = −0.92), at most half the estimation window (a slower one is an
+        offset or a drift in disguise), and a positive coupling (a passive storage: s is pulled towards
+        z). A rejected coupled state lets the family's next significant hypothesis be refitted
+        (``Diagnoser._fallbacks``)."""
+        res = dg.refit(fit, cand)
+        hyp = cand.hyp
+        if res is None or hyp.info.get("kind") != "coupled_state":
+            return res
+        tau = float(res.model.params[hyp.info["tau_name"]])
+        c = float(res.model.params[hyp.coefs[0]])
+        span = (dg.prob.split.est[1] - dg.prob.split.est[0]) * dg.dt
+        why = (f"time constant {tau / dg.dt:.3g} samples, below half a sample: not a storage these samples resolve"
+               if tau < 0.5 * dg.dt else
+               f"time constant {tau:.4g} s, above half the estimation window ({span:.4g} s): an offset or a drift"
+               if tau > 0.5 * span else
+               f"coupling {c:.4g} not positive: not a passive storage" if c <= 0 else None)
+        if why is None:
+            return res
+        cand.reason = "refit rejected: " + why
+        return None
+
     def refit_model(self, model, hyp, start):
         tau = hyp.info["tau_name"]
         if hyp.info.get("kind") == "coupled_state":      # c from the test's estimate, τ free from its grid value
