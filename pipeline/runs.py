@@ -196,7 +196,7 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
                                         "final model, estimation data (noise families)"),
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
-            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history),
+            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history, {f["family"] for f in diag.findings}),
                                                              "why": why_unexplained(diag.history, diag.adequacy)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
@@ -209,18 +209,23 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
     }
 
 
-def _tried(history: list[dict]) -> list[dict]:
-    """Per family, the last reason it was not (or was) taken, from the diagnosis history; "accepted"
-    once any of its candidates was (a later round's "not significant" of its remaining hypotheses does
-    not undo a finding)."""
+TAKEN = "accepted"
+NOT_TAKEN = "met the acceptance rule in its round, not taken: another extension explained more"
+
+
+def _tried(history: list[dict], found: set[str] = frozenset()) -> list[dict]:
+    """Per family, the last reason it was not taken, from the diagnosis history; "accepted" for a
+    family among the findings (``found``; a later round's "not significant" of its remaining
+    hypotheses does not undo a finding). A candidate's own reason "accepted" means it met the
+    acceptance rule; for a family that is not a finding that reads :data:`NOT_TAKEN`."""
     out: dict[str, str] = {}
     for it in history:
         for c in it.get("candidates", []):
-            if out.get(c["family"]) != "accepted":
-                out[c["family"]] = c.get("reason") or ""
+            out[c["family"]] = c.get("reason") or ""
         for sk in it.get("skipped", []):
             out.setdefault(sk["family"], sk["reason"])
-    return [{"family": f, "reason": r} for f, r in out.items()]
+    return [{"family": f, "reason": TAKEN if f in found else (NOT_TAKEN if r == TAKEN else r)}
+            for f, r in out.items()]
 
 
 def _not_testable(history: list[dict]) -> list[dict]:

@@ -160,16 +160,18 @@ def test_bounds_keep_a_fit_physical_where_the_unbounded_one_fails_on_validation(
 
 
 def test_families_tried_keeps_an_accepted_family_accepted():
-    """A family accepted in round 1 whose remaining hypotheses are not significant in round 3 (the
-    dryer: the input lag accepted, the coupled state left) is listed as accepted, not as "not
-    significant"; other families keep their last reason."""
-    from pipeline.runs import _tried
+    """A family named in round 1 whose remaining hypotheses are not significant in round 3 (the dryer:
+    the input lag named, the coupled state left) is listed as accepted, not as "not significant"; a
+    family whose candidate met the rule but was not taken (another explained more) does not read
+    "accepted"; other families keep their last reason."""
+    from pipeline.runs import NOT_TAKEN, _tried
     history = [
         {"candidates": [{"family": "unmodeled_dynamics", "reason": "refit rejected: too fast"},
                         {"family": "unmodeled_dynamics", "reason": "accepted"},
+                        {"family": "state_saturation", "reason": "accepted"},
                         {"family": "offset", "reason": "not significant after Holm correction"}]},
         {"candidates": [{"family": "unmodeled_dynamics", "reason": "not significant after Holm correction"},
                         {"family": "offset", "reason": "refit failed: diverged"}]},
     ]
-    got = {r["family"]: r["reason"] for r in _tried(history)}
-    assert got == {"unmodeled_dynamics": "accepted", "offset": "refit failed: diverged"}
+    got = {r["family"]: r["reason"] for r in _tried(history, {"unmodeled_dynamics"})}
+    assert got == {"unmodeled_dynamics": "accepted", "state_saturation": NOT_TAKEN, "offset": "refit failed: diverged"}

@@ -108,8 +108,9 @@ def _key_text(f: dict) -> str:
     if fam == "input_delay" and g("delay_s") is not None:
         return f"{sig(g('delay_s'), 3)} s" + (f" ({sig(g('delay_samples'), 2)} samples)" if g("delay_samples") is not None else "")
     if fam == "unmodeled_dynamics" and g("time_constant_s") is not None:
-        return f"time constant {sig(g('time_constant_s'), 3)} s" + (f" on input {g('input')}" if g("input") else
-                                                                     f", a state coupled to {g('state')}" if g("state") else "")
+        if g("state") and not g("input"):
+            return f"a missing state coupled to {g('state')}, time constant {sig(g('time_constant_s'), 3)} s"
+        return f"time constant {sig(g('time_constant_s'), 3)} s" + (f" on input {g('input')}" if g("input") else "")
     if fam == "input_saturation" and g("limit") is not None:
         return f"{g('input') or 'the input'} clipped at ±{sig(g('limit'), 3)}"
     if fam == "state_saturation" and g("limit") is not None:
