@@ -236,8 +236,10 @@ def _not_testable(history: list[dict]) -> list[dict]:
 
 
 def _test_rows(tests, on: str) -> list[dict]:
+    """Contract §3 test rows, extended: ``tested`` is false on a row that was not run (a noise family
+    on an inadequate structure), whose ``passed`` is then false without anything having failed."""
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
-             "passed": t.passed, "detail": t.detail, "on": on,
+             "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail, "on": on,
              **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
             for t in tests]
 

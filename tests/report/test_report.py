@@ -2,6 +2,7 @@
 
 import base64
 import io
+import json
 import re
 from pathlib import Path
 
@@ -308,6 +309,11 @@ def test_a_run_without_an_accepted_cause_draws_the_nominal_model_once(tmp_path):
     # so, not "failed" in red
     rows = re.findall(r"<tr><td>(?:colored_noise|heavy_tailed_noise)</td>.*?</tr>", html, flags=re.S)
     assert len(rows) == 2 and all('<td class="r">not tested</td>' in r and ">failed<" not in r for r in rows)
+    # ... and summary.json says so too (``tested``, an extension of contract §3's rows)
+    d = json.loads((tmp_path / "run" / "summary.json").read_text())["diagnosis"]
+    tested = {t["name"]: t["tested"] for t in d["final_tests"]}
+    assert tested["colored_noise"] is False and tested["heavy_tailed_noise"] is False
+    assert all(t["tested"] for t in d["tests"])
 
 
 def test_residual_figures_show_every_output(monkeypatch):
