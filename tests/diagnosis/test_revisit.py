@@ -33,13 +33,16 @@ def _diagnosis(path: Path) -> dict:
         return analyse(load_config(path)).summary["diagnosis"]
 
 
-def test_a_lag_chosen_for_the_springs_misfit_is_replaced_by_the_delay(tmp_path):
+def test_a_dead_time_with_a_spring_ends_as_the_delay_not_a_lag(tmp_path):
     """Seed 2009, a dead time and a cubic spring. The forward pass switched to zoh (half a sample of the
-    dead time), then named a first-order lag (1.4 effective BIC units ahead of the delay while the
-    spring's misfit coloured the residual), then the spring: the lag's time constant 0.089 s, the
-    spring −2.954. With the spring in the model the delay fits the estimation part far better (weighted
-    SSE 1.07 against 1.48), so it replaces the lag; the zoh switch then gains nothing over foh and is
-    dropped, and the delay is the whole 0.1 s."""
+    dead time), then, until the twenty-seventh session, named a first-order lag (1.4 effective BIC units
+    ahead of the delay while the spring's misfit coloured the residual), then the spring, and the
+    backward step swapped the lag for the delay (weighted SSE 1.07 against 1.48 with the spring in the
+    model). Since ``unmodeled_dynamics`` also proposes a coupled state, its model prior spreads over
+    more places (2 ln places) and the forward pass names the delay itself; the zoh switch then gains
+    nothing over foh and is dropped, and the delay is the whole 0.1 s. (No seed of 2009–2089 still
+    names the lag first and swaps it; 2044, 2051 and 2063 keep a lag beside the delay, before and after
+    this change. The swap itself is exercised below, a lag and a delay each replaced by the switch.)"""
     d = _diagnosis(record(tmp_path, "delay-cubic-2009", 2009, tau=0.1, k3=3.0))
     by = {f["family"]: f for f in d["findings"]}
     assert set(by) >= {"input_delay", "cubic_stiffness"}
@@ -48,16 +51,7 @@ def test_a_lag_chosen_for_the_springs_misfit_is_replaced_by_the_delay(tmp_path):
     assert by["input_delay"]["delay_s"] == pytest.approx(0.1, abs=0.1 * DT)
     assert -by["cubic_stiffness"]["coefficient"] == pytest.approx(3.0, rel=0.05)
     moves = {m["move"]: m for m in d["revisit"]}
-    swap = moves["swap"]
-    assert swap["family"] == "unmodeled_dynamics" and swap["replaced_by_family"] == "input_delay"
-    assert swap["criterion_change"] < -2.0 and swap["sse_w"][1] < swap["sse_w"][0]
-    assert moves["drop"]["family"] == "intersample"
-    # the delay's own gain (before the spring was in the model) has an interval reaching below 0; its
-    # gain given the spring is what names it, bounded above 0, as for a look-ahead finding
-    delay = by["input_delay"]
-    assert delay["gain"]["ci95"][0] <= 0 < delay["gain_given"]["ci95"][0]
-    assert "in place of unmodeled_dynamics" in delay["revisit"]
-    assert any(e["test"] == "revisit_swap" for e in delay["evidence"])
+    assert "swap" not in moves and moves["drop"]["family"] == "intersample"
 
 
 @pytest.mark.parametrize("seed,effects", [(2007, dict(tau=0.1, d=0.2)), (2007, dict(tau=0.1, k3=3.0))])
@@ -114,11 +108,12 @@ def test_a_real_switch_to_zoh_is_kept_after_a_later_finding(tmp_path):
     assert not d["revisit"]
 
 
-@pytest.mark.parametrize("seed,stand_in", [(1, "unmodeled_dynamics"), (11, "input_delay")])
+@pytest.mark.parametrize("seed,stand_in", [(1, "input_delay"), (11, "input_delay"), (24, "unmodeled_dynamics")])
 def test_a_sub_sample_lag_or_delay_standing_in_for_a_held_input_becomes_the_switch(tmp_path, seed, stand_in):
     """Held input, configured foh, with a force offset d = 0.02 and a weak spring k3 = 0.1. The forward
-    pass named the offset, then a sub-sample stand-in for the hold (seed 1: a first-order lag of 0.6
-    samples; seed 11: a dead time of about half a sample), then a spring term: in the stand-in's round the
+    pass named the offset, then a sub-sample stand-in for the hold (seeds 1 and 11: a dead time of about
+    half a sample; seed 24: a first-order lag; seed 1's was a lag of 0.6 samples until the lag's family
+    also proposed a coupled state and its model prior spread over more places), then a spring term: in the stand-in's round the
     spring's misfit was still in the residual and the zoh switch lost to it by more than the 10 BIC units
     the intersample choice is given. With the spring in the model zoh fits the estimation part about as
     well with one parameter fewer and passes the switch's own rule against foh, so it takes the
