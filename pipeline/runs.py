@@ -196,8 +196,9 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
                                         "final model, estimation data (noise families)"),
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
-            "unexplained": None if diag.where is None else {**diag.where, "families_tried": _tried(diag.history, {f["family"] for f in diag.findings}),
-                                                             "why": why_unexplained(diag.history, diag.adequacy)},
+            "unexplained": None if diag.where is None else {
+                **diag.where, "families_tried": _tried(diag.history, {f["family"] for f in diag.findings}),
+                "why": why_unexplained(diag.history, diag.adequacy)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
             "alpha": lc.cfg.diagnose.alpha, "history": diag.history, "revisit": diag.revisit,
@@ -239,7 +240,8 @@ def _test_rows(tests, on: str) -> list[dict]:
     """Contract §3 test rows, extended: ``tested`` is false on a row that was not run (a noise family
     on an inadequate structure), whose ``passed`` is then false without anything having failed."""
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
-             "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail, "on": on,
+             "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail,
+             "on": on,
              **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
             for t in tests]
 

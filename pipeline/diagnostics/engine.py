@@ -820,10 +820,10 @@ class Diagnoser:
           2 %). Not on a long record (:meth:`_long`; Silverbox: 4 s more for the same findings), where
           the representative and its near tie stand for the family as before;
         * after a representative's refit failed from every start (it diverged, or ended above the
-          current model's error), or its family rejected the refitted form ("refit rejected": a
-          coupled state faster than the samples), the next ones explaining at least ``FALLBACK_SHARE`` of its share, at
-          most ``MAX_FALLBACKS``: the first-ranked hypothesis can be one that cannot be simulated (c·h²
-          with c > 0 runs away on that tank)."""
+          current model's error) or its family rejected the refitted form ("refit rejected": a coupled
+          state faster than the samples), the next ones explaining at least ``FALLBACK_SHARE`` of its
+          share, at most ``MAX_FALLBACKS``: the first-ranked hypothesis can be one that cannot be
+          simulated (c·h² with c > 0 runs away on that tank)."""
         out = []
         for c in todo:
             forms = REGISTRY[c.hyp.family].refit_alternates
@@ -1027,7 +1027,8 @@ class Diagnoser:
         new (unmeasured) state."""
         m = fit.model
         prob = self.prob
-        if hyp.equation is None or m.extra_states or hyp.extra_states or not all(st in prob.out_names for st in m.states):
+        if hyp.equation is None or m.extra_states or hyp.extra_states \
+                or not all(st in prob.out_names for st in m.states):
             return None
         from scipy.signal import savgol_filter
         sl = prob.split.est_slice()
