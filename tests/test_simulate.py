@@ -59,6 +59,39 @@ def test_extension_terms_equal_writing_them_in_the_equation():
                                atol=1e-12)
 
 
+def test_generic_kernel_with_two_inputs_and_with_none():
+    """The generic kernel is unrolled over the model's own states and inputs: an extension on a model
+    with two inputs (each interpolated with foh, over 3 sub-steps) and on one without inputs gives the
+    response of the same equations written out (lean kernel); a limit without any program runs the
+    generic kernel's program-free path and must clamp the state."""
+    from pipeline.model import Limit
+    t = np.arange(2000) * 0.01
+    U2 = np.column_stack([np.sin(1.3 * t), np.sign(np.sin(0.4 * t))])
+
+    def two(eq_v):
+        allowed = {"x", "v", "u1", "u2", "t"}
+        return Model(states=("x", "v"), inputs=("u1", "u2"), output_exprs={}, params={}, free=(),
+                     equations={"x": parse("v", allowed), "v": parse(eq_v, allowed)}, initial={"x": 0.0, "v": 0.0},
+                     substeps=3, intersample="foh", nominal_params=())
+    ext = two("u1 - 0.5*v - 4*x + 0.3*u2").extend(
+        [Term("static_nonlinearity", "expr", "v", "a", text="u2*x"), Term("offset", "const", "v", "b")],
+        {"a": -0.7, "b": 0.2})
+    full = two("u1 - 0.5*v - 4*x + 0.3*u2 - 0.7*u2*x + 0.2")
+    np.testing.assert_allclose(simulate_states(ext, t, U2, np.zeros(2)).X, simulate_states(full, t, U2, np.zeros(2)).X,
+                               atol=1e-12)
+    none = Model(states=("x",), inputs=(), output_exprs={}, params={}, free=(), equations={"x": parse("-x", {"x"})},
+                 initial={"x": 1.0}, substeps=2, nominal_params=())
+    Z = np.zeros((len(t), 1))
+    x = simulate_states(none.extend([Term("offset", "const", "x", "d")], {"d": 0.5}), t, Z, np.ones(1)).X[:, 0]
+    np.testing.assert_allclose(x, 0.5 + 0.5 * np.exp(-t), atol=1e-9)       # x' = -x + 0.5, x(0) = 1
+    lim = two("u1 - 0.5*v - 4*x + 0.3*u2").extend([], {"hi": 0.05}, limits=(Limit("state_saturation", "x", None, "hi", "v"),))
+    free = simulate_states(two("u1 - 0.5*v - 4*x + 0.3*u2"), t, U2, np.zeros(2)).X[:, 0]
+    clamped = simulate_states(lim, t, U2, np.zeros(2)).X[:, 0]
+    assert free.max() > 0.1 and clamped.max() == 0.05
+    below = free < 0.04
+    np.testing.assert_array_equal(clamped[:np.argmax(~below)], free[:np.argmax(~below)])
+
+
 def test_compiled_terms_simulate_bit_for_bit_like_interpreted_ones():
     """An accepted model's terms compiled into its kernel (Model.compiled) give the interpreter's
     numbers to the last bit, alone, under foh with substeps, and with a later hypothesis of every
