@@ -8,9 +8,11 @@ generated from the checked expressions as Python source, written to a per-struct
 folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate refits run in threads) and
 ``error_model='numpy'`` (a division by zero gives inf/nan, caught as divergence, instead of a check per
 division): one compile per model *structure* and machine, reused
-across processes. Extension terms are a table evaluated inside the same kernel, so refitting a
-candidate extension never recompiles; the terms of an accepted model (``Model.compiled``) are written
-into its own kernel's source instead, since each interpreted term costs about a nominal right-hand side.
+across processes. Extensions are register code (:func:`programs`: each operation reads slots of a
+value vector holding the stage state, inputs, t, parameters and constants, and writes one slot of its
+own) interpreted inside the same kernel, so refitting a candidate extension never recompiles; the terms
+of an accepted model (``Model.compiled``) are written into its own kernel's source instead, since the
+first interpreted term costs more than the nominal right-hand side.
 Divergence (non-finite or beyond ``bound``) stops the loop and is reported with its sample index; a
 fixed-step loop cannot hang.
 """
@@ -73,17 +75,19 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X):
+def simulate(U, T, nsub, foh, p, x0, code, consts, progs, limits, bound, X):
     n = U.shape[0]
     nx = x0.shape[0]
-    nu = U.shape[1]
     np_ = progs.shape[0]
-    xt = np.empty(nx)
-    ui = np.zeros(nu)
-    ue = np.zeros(nu)
-    pe = p.copy()
+    n_par = p.shape[0]
+    c0 = {g_pe} + 2 * n_par
+    V = np.zeros(c0 + consts.shape[0] + code.shape[0])
+    for i in range(n_par):
+        V[{g_pe} + i] = p[i]
+        V[{g_pe} + n_par + i] = p[i]
+    for i in range(consts.shape[0]):
+        V[c0 + i] = consts[i]
     dx = np.zeros(nx)
-    st = np.empty(64)
     xa = np.empty(nx)
     nl = limits.shape[0]
     n_pre = 0
@@ -123,60 +127,40 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
 {assign_generic}
                             continue
                         jj = j if j < n_pre else j - 1
-                        kind = progs[jj, 0]
-                        sp = 0
                         for i in range(progs[jj, 2], progs[jj, 3]):
-                            o = ops[i]
-                            if o < 10:
-                                if o == 0:
-                                    v = consts[args[i]]
-                                elif o == 1:
-                                    v = xt[args[i]]
-                                elif o == 2:
-                                    v = ui[args[i]]
-                                elif o == 3:
-                                    v = ue[args[i]]
-                                elif o == 4:
-                                    v = pe[args[i]]
-                                elif o == 6:
-                                    v = p[args[i]]
+                            o = code[i, 0]
+                            x = V[code[i, 1]]
+                            if o < 15:
+                                y = V[code[i, 2]]
+                                if o == 12:
+                                    r = x * y
+                                elif o == 10:
+                                    r = x + y
+                                elif o == 11:
+                                    r = x - y
+                                elif o == 13:
+                                    r = x / y
                                 else:
-                                    v = t
-                                st[sp] = v
-                                sp += 1
+                                    r = x ** y
                             elif o < 20:
                                 if o == 15:
-                                    st[sp - 1] = -st[sp - 1]
-                                    continue
-                                if o == 16:
-                                    x = st[sp - 1]
-                                    m = args[i]
-                                    if m == 2:
-                                        st[sp - 1] = x * x
-                                    elif m == 3:
-                                        st[sp - 1] = x * x * x
-                                    else:
-                                        y = 1.0
-                                        for _q in range(m):
-                                            y *= x
-                                        st[sp - 1] = y
-                                    continue
-                                sp -= 1
-                                x = st[sp - 1]
-                                y = st[sp]
-                                if o == 10:
-                                    st[sp - 1] = x + y
-                                elif o == 11:
-                                    st[sp - 1] = x - y
-                                elif o == 12:
-                                    st[sp - 1] = x * y
-                                elif o == 13:
-                                    st[sp - 1] = x / y
+                                    r = -x
                                 else:
-                                    st[sp - 1] = x ** y
+                                    m = code[i, 2]
+                                    if m == 2:
+                                        r = x * x
+                                    elif m == 3:
+                                        r = x * x * x
+                                    else:
+                                        r = 1.0
+                                        for _q in range(m):
+                                            r *= x
                             elif o < 40:
-                                x = st[sp - 1]
-                                if o == 20:
+                                if o == 26:
+                                    r = abs(x)
+                                elif o == 27:
+                                    r = np.sign(x)
+                                elif o == 20:
                                     r = np.sin(x)
                                 elif o == 21:
                                     r = np.cos(x)
@@ -188,10 +172,6 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
                                     r = np.log(x)
                                 elif o == 25:
                                     r = np.sqrt(x)
-                                elif o == 26:
-                                    r = abs(x)
-                                elif o == 27:
-                                    r = np.sign(x)
                                 elif o == 28:
                                     r = np.tanh(x)
                                 elif o == 29:
@@ -202,21 +182,17 @@ def simulate(U, T, nsub, foh, p, x0, ops, args, consts, progs, limits, bound, X)
                                     r = np.arctan(x)
                                 else:
                                     r = 1.0 if x >= 0.0 else 0.0
-                                st[sp - 1] = r
-                            elif o < 42:
-                                sp -= 1
-                                x = st[sp - 1]
-                                y = st[sp]
-                                st[sp - 1] = min(x, y) if o == 40 else max(x, y)
                             else:
-                                sp -= 2
-                                st[sp - 1] = min(max(st[sp - 1], st[sp]), st[sp + 1])
-                        val = st[0]
+                                y = V[code[i, 2]]
+                                r = min(x, y) if o == 40 else max(x, y)
+                            V[code[i, 3]] = r
+                        val = V[progs[jj, 4]]
+                        kind = progs[jj, 0]
                         tg = progs[jj, 1]
                         if kind == 0:
-                            pe[tg] = val
+                            V[{g_pe} + tg] = val
                         elif kind == 1:
-                            ue[tg] = val
+                            V[{g_ue} + tg] = val
                         elif kind == 2:
                             dx[tg] += val
                         else:
@@ -256,52 +232,67 @@ _OPS = {ast.Add: 10, ast.Sub: 11, ast.Mult: 12, ast.Div: 13, ast.Pow: 14}
 _FUNC_OPS = {"sin": 20, "cos": 21, "tan": 22, "exp": 23, "log": 24, "sqrt": 25, "abs": 26, "sign": 27,
              "tanh": 28, "sinh": 29, "cosh": 30, "arctan": 31, "step": 32, "minimum": 40, "maximum": 41,
              "clip": 42}
-PROGRAM_STACK = 64
 POWI_MAX = 8
+# operands of these ops are two slots (the others: one slot, and powi its whole exponent in b)
+_BINARY = (10, 11, 12, 13, 14, 40, 41)
+_CONST_TAG, _TMP_TAG = 1 << 40, 1 << 41     # slots placed once every program is emitted
+
+
+def layout(nx: int, nu: int, n_par: int) -> dict[str, int]:
+    """Offsets in the generic kernel's value vector V: the stage state (``x``), the raw and effective
+    inputs (``ui``, ``ue``), ``t``, the effective and raw parameters (``pe``, ``p``), then the constants
+    (``c``) and one slot per instruction. ``pe`` and everything before it depend only on the numbers of
+    states and inputs, which the kernel's source is written for; the rest is found from ``p``'s length."""
+    pe = nx + 2 * nu + 1
+    return {"x": 0, "ui": nx, "ue": nx + nu, "t": nx + 2 * nu, "pe": pe, "p": pe + n_par, "c": pe + 2 * n_par}
 
 
 @dataclass
 class Programs:
-    ops: np.ndarray
-    args: np.ndarray
+    code: np.ndarray       # (n, 4): op, slot a, slot b (powi: the exponent), result slot — register code on V
     consts: np.ndarray
-    progs: np.ndarray      # (n, 4): kind (0 param, 1 input, 2 additive term, 3 state eq), target, start, stop
+    progs: np.ndarray      # (n, 5): kind (0 param, 1 input, 2 additive term, 3 state eq), target, start, stop,
+    #                        the slot holding the program's value
     limits: np.ndarray     # (n, 4): state, lo param index or -1, hi param index or -1, rate state or -1
+    size: int = 0          # len(V)
 
 
-def _emit(tree: ast.expr, resolve, ops: list, args: list, consts: list) -> int:
-    """Post-order code of a checked expression for the kernel's stack machine; returns its depth."""
+def _emit(tree: ast.expr, resolve, code: list, consts: list) -> int:
+    """Three-address code of a checked expression: each operation reads its operands' slots of V and
+    writes a new slot; a leaf (state, input, parameter, t, constant) is its own slot and costs nothing.
+    The operations and their operands are those of the expression, so every value is the same double as
+    the expression's. Returns the slot of the value (tagged for constants and results: :func:`programs`
+    places them)."""
+    def op(o: int, a: int, b: int = 0) -> int:
+        code.append([o, a, b, _TMP_TAG + len(code)])
+        return code[-1][3]
+
     if isinstance(tree, ast.Constant):
-        ops.append(0); args.append(len(consts)); consts.append(float(tree.value))
-        return 1
+        consts.append(float(tree.value))
+        return _CONST_TAG + len(consts) - 1
     if isinstance(tree, ast.Name):
-        op, arg = resolve(tree.id)
-        if op == 0:  # a named constant (pi)
-            ops.append(0); args.append(len(consts)); consts.append(float(arg))
-        else:
-            ops.append(op); args.append(arg)
-        return 1
+        slot, value = resolve(tree.id)
+        if slot is None:  # a named constant (pi)
+            consts.append(float(value))
+            return _CONST_TAG + len(consts) - 1
+        return slot
     if isinstance(tree, ast.UnaryOp):
-        d = _emit(tree.operand, resolve, ops, args, consts)
-        if isinstance(tree.op, ast.USub):
-            ops.append(15); args.append(0)
-        return d
+        a = _emit(tree.operand, resolve, code, consts)
+        return op(15, a) if isinstance(tree.op, ast.USub) else a
     if (isinstance(tree, ast.BinOp) and isinstance(tree.op, ast.Pow) and isinstance(tree.right, ast.Constant)
             and float(tree.right.value).is_integer() and 1 <= tree.right.value <= POWI_MAX):
         # x**n for a small whole n: repeated multiplication (op 16), not a pow() call, which is several
         # times slower and dominated the cost of a cubic term
-        d = _emit(tree.left, resolve, ops, args, consts)
-        ops.append(16); args.append(int(tree.right.value))
-        return d
+        return op(16, _emit(tree.left, resolve, code, consts), int(tree.right.value))
     if isinstance(tree, ast.BinOp):
-        d1 = _emit(tree.left, resolve, ops, args, consts)
-        d2 = _emit(tree.right, resolve, ops, args, consts)
-        ops.append(_OPS[type(tree.op)]); args.append(0)
-        return max(d1, d2 + 1)
+        a = _emit(tree.left, resolve, code, consts)
+        return op(_OPS[type(tree.op)], a, _emit(tree.right, resolve, code, consts))
     if isinstance(tree, ast.Call):
-        ds = [_emit(a, resolve, ops, args, consts) + i for i, a in enumerate(tree.args)]
-        ops.append(_FUNC_OPS[tree.func.id]); args.append(0)
-        return max(ds)
+        slots = [_emit(a, resolve, code, consts) for a in tree.args]
+        o = _FUNC_OPS[tree.func.id]
+        if o == 42:          # clip(a, lo, hi) = min(max(a, lo), hi), as numpy's clip and the stack machine did
+            return op(40, op(41, slots[0], slots[1]), slots[2])
+        return op(o, *slots)
     raise TypeError(type(tree).__name__)
 
 
@@ -311,32 +302,30 @@ def programs(model: Model) -> Programs:
     pidx = {k: i for i, k in enumerate(model.param_names)}
     sidx = {s: i for i, s in enumerate(model.states)}
     uidx = {u: i for i, u in enumerate(model.inputs)}
-    ops: list = []
-    args: list = []
+    L = layout(len(model.states), len(model.inputs), len(model.param_names))
+    code: list = []
     consts: list = []
     rows = []
 
     def resolver(raw_inputs: bool, raw_params: bool):
         def resolve(name):
             if name in sidx:
-                return 1, sidx[name]
+                return L["x"] + sidx[name], None
             if name in uidx:
-                return (2 if raw_inputs else 3), uidx[name]
+                return L["ui" if raw_inputs else "ue"] + uidx[name], None
             if name in pidx:
-                return (6 if raw_params else 4), pidx[name]
+                return L["p" if raw_params else "pe"] + pidx[name], None
             if name == "t":
-                return 5, 0
+                return L["t"], None
             if name in CONSTANTS:
-                return 0, CONSTANTS[name]
+                return None, CONSTANTS[name]
             raise KeyError(name)
         return resolve
 
     def add(kind, target, tree, resolve):
-        a = len(ops)
-        depth = _emit(tree, resolve, ops, args, consts)
-        if depth > PROGRAM_STACK:
-            raise ValueError(f"extension expression needs a stack of {depth} (> {PROGRAM_STACK})")
-        rows.append((kind, target, a, len(ops)))
+        a = len(code)
+        res = _emit(tree, resolve, code, consts)
+        rows.append([kind, target, a, len(code), res])
 
     for rw in model.param_rewrites:
         add(0, pidx[rw.target], model.expr(rw.text).tree, resolver(False, True))
@@ -353,10 +342,27 @@ def programs(model: Model) -> Programs:
         add(2, sidx[term.target], tree, resolver(False, False))
     for s in model.extra_states:
         add(3, sidx[s], model.equations[s].tree, resolver(True, False))   # an actuator state sees the raw input
-    lim = [(sidx[L.state], pidx[L.lo] if L.lo else -1, pidx[L.hi] if L.hi else -1,
-            sidx[L.rate] if L.rate else -1) for L in model.limits]
-    return Programs(np.array(ops, np.int64), np.array(args, np.int64), np.array(consts + [0.0], float),
-                    np.array(rows, np.int64).reshape(-1, 4), np.array(lim, np.int64).reshape(-1, 4))
+    lim = [(sidx[L_.state], pidx[L_.lo] if L_.lo else -1, pidx[L_.hi] if L_.hi else -1,
+            sidx[L_.rate] if L_.rate else -1) for L_ in model.limits]
+    consts.append(0.0)                     # never empty
+    tmp = L["c"] + len(consts)
+
+    def place(slot: int) -> int:
+        if slot >= _TMP_TAG:
+            return tmp + slot - _TMP_TAG
+        if slot >= _CONST_TAG:
+            return L["c"] + slot - _CONST_TAG
+        return slot
+    for ins in code:
+        ins[1] = place(ins[1])
+        if ins[0] in _BINARY:
+            ins[2] = place(ins[2])
+        ins[3] = place(ins[3])
+    for r in rows:
+        r[4] = place(r[4])
+    return Programs(np.array(code, np.int64).reshape(-1, 4), np.array(consts, float),
+                    np.array(rows, np.int64).reshape(-1, 5), np.array(lim, np.int64).reshape(-1, 4),
+                    tmp + len(code))
 
 
 def _kernel_terms(model: Model) -> list:
@@ -416,11 +422,12 @@ def kernel_source(model: Model) -> str:
     # right-hand side there, in the interpreter's order. Array loops of run-time length and numba calls
     # with array arguments (each one reference-counted) cost it half its time before (Silverbox, one
     # interpreted term: 12.7 -> 9.2 ms); the floating-point operations are the same, in the same order.
-    gnames = {**{u: f"ue[{i}]" for i, u in enumerate(model.inputs)},
-              **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}, "t": "t",
-              **{s: f"xt[{i}]" for i, s in enumerate(model.states)}}
+    L = layout(nx, nu, 0)
+    gnames = {**{u: f"V[{L['ue'] + i}]" for i, u in enumerate(model.inputs)},
+              **{p: f"V[{L['pe'] + i}]" for i, p in enumerate(model.param_names)}, "t": "t",
+              **{s: f"V[{L['x'] + i}]" for i, s in enumerate(model.states)}}
     fast = {**{u: f"u_{i}" for i, u in enumerate(model.inputs)},
-            **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}, "t": "t",
+            **{p: f"p[{i}]" for i, p in enumerate(model.param_names)}, "t": "t",
             **{s: f"a_{i}" for i, s in enumerate(model.states)}}
     generic = [(i, "=", model.equations[s].tree) for i, s in enumerate(model.nominal_states)]
     # compiled extension terms (Model.kernel_terms): c * expr added after the nominal right-hand side,
@@ -446,8 +453,10 @@ def kernel_source(model: Model) -> str:
         g_a2=rows(20, "a_{i} = xs_{i} + 0.5 * h * k2_{i}"), g_a3=rows(20, "a_{i} = xs_{i} + h * k3_{i}"),
         g_u="\n".join(f"{' ' * 16}u_{i} = U[k, {i}] + du_{i} * f" for i in range(nu)),
         g_fast="\n".join(g_fast),
-        g_arrays="\n".join([f"{' ' * 20}xt[{i}] = a_{i}" for i in range(nx)]
-                           + [f"{' ' * 20}ui[{i}] = u_{i}\n{' ' * 20}ue[{i}] = u_{i}" for i in range(nu)]),
+        g_arrays="\n".join([f"{' ' * 20}V[{L['x'] + i}] = a_{i}" for i in range(nx)]
+                           + [f"{' ' * 20}V[{L['ui'] + i}] = u_{i}\n{' ' * 20}V[{L['ue'] + i}] = u_{i}"
+                              for i in range(nu)] + [f"{' ' * 20}V[{L['t']}] = t"]),
+        g_pe=str(L["pe"]), g_ue=str(L["ue"]),
         assign_generic="\n".join(g_assign),
         g_read=rows(20, "d_{i} = dx[{i}]"),
         **{f"g_k{j}": rows(20, f"k{j}_{{i}} = d_{{i}}") for j in (1, 2, 3, 4)},
@@ -569,15 +578,23 @@ _CHECKED: dict = {}
 
 
 def _check_programs(pr: Programs, n_p: int, nx: int, nu: int) -> None:
-    """Every index the kernel will dereference is inside its array."""
-    ok = True
-    for op, lim in ((1, nx), (2, nu), (3, nu), (4, n_p), (6, n_p)):
-        sel = pr.args[pr.ops == op]
-        ok &= not len(sel) or (sel.min() >= 0 and sel.max() < lim)
-    sel = pr.args[pr.ops == 0]
-    ok &= not len(sel) or sel.max() < len(pr.consts)
+    """Every index the kernel will dereference is inside its array: each slot an instruction reads lies
+    in V (of the size the kernel allocates for ``n_p`` parameters), each result slot among the
+    instructions' own, each program's code and value in range, each target in its vector."""
+    L = layout(nx, nu, n_p)
+    tmp = L["c"] + len(pr.consts)
+    size = tmp + len(pr.code)
+    c = pr.code
+    ok = size == pr.size
+    if len(c):
+        binary = np.isin(c[:, 0], _BINARY)
+        ok &= (c[:, 1].min() >= 0 and c[:, 1].max() < size and c[:, 3].min() >= tmp and c[:, 3].max() < size
+               and (not binary.any() or (c[binary, 2].min() >= 0 and c[binary, 2].max() < size)))
+        powi = c[:, 0] == 16
+        ok &= not powi.any() or (c[powi, 2].min() >= 1 and c[powi, 2].max() <= POWI_MAX)
     if len(pr.progs):
-        ok &= pr.progs[:, 2].min() >= 0 and pr.progs[:, 3].max() <= len(pr.ops)
+        ok &= (pr.progs[:, 2].min() >= 0 and pr.progs[:, 3].max() <= len(c) and pr.progs[:, 4].min() >= 0
+               and pr.progs[:, 4].max() < size)
         for kind, lim in ((0, n_p), (1, nu), (2, nx), (3, nx)):
             tg = pr.progs[pr.progs[:, 0] == kind, 1]
             ok &= not len(tg) or (tg.min() >= 0 and tg.max() < lim)
@@ -633,9 +650,9 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     if t.ndim != 1 or U.shape[0] != n or x0.shape != (nx,) or U.shape[1] < max(1, len(model.inputs)):
         raise ValueError(f"simulate_states: inconsistent shapes t {t.shape}, U {U.shape}, x0 {x0.shape} "
                          f"for {nx} states and {len(model.inputs)} inputs")
-    ck = (id(pr), len(p), nx, U.shape[1])
+    ck = (id(pr), len(p), nx, len(model.inputs))
     if _CHECKED.get(ck) is not pr:         # checked once per programs object and shape
-        _check_programs(pr, len(p), nx, U.shape[1])
+        _check_programs(pr, len(p), nx, len(model.inputs))
         if len(_CHECKED) > 4096:
             _CHECKED.clear()
         _CHECKED[ck] = pr                  # holding pr: its id cannot be reused while the entry lives
@@ -646,8 +663,8 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     if len(pr.progs) == 0 and len(pr.limits) == 0:   # the nominal structure alone: the lean kernel
         status = lean(U, t, int(model.substeps), model.intersample != "zoh", p, x0, float(bound), X)
     else:
-        status = generic(U, t, int(model.substeps), model.intersample != "zoh", p, x0, pr.ops, pr.args,
-                         pr.consts, pr.progs, pr.limits, float(bound), X)
+        status = generic(U, t, int(model.substeps), model.intersample != "zoh", p, x0, pr.code, pr.consts,
+                         pr.progs, pr.limits, float(bound), X)
     if status >= 0:
         nonfinite = bool(np.any(np.isnan(X[status])))
         X[status:] = np.nan

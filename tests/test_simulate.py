@@ -182,3 +182,34 @@ def test_rhs_vectorized_matches_the_written_out_equation():
     got = rhs_vectorized(ext, X, U, t)
     np.testing.assert_allclose(got[:, 1], ref, atol=1e-12)
     np.testing.assert_allclose(got[:, 0], X[:, 1])
+
+
+def test_extension_code_that_points_outside_the_value_vector_is_refused(monkeypatch):
+    """The generic kernel indexes without bounds checks, so every slot of its register code is checked
+    before the call: a slot read past the value vector, a result written over the state (instead of a
+    slot of its own), a program value past the vector and a powi exponent outside 1..POWI_MAX each give
+    a ValueError, and the untampered code simulates."""
+    import pipeline.simulate as sim
+    from dataclasses import replace as dc_replace
+    base = _model({"x": "v", "v": "u - 0.5*v - 4*x"}, {}, ["x", "v"])
+    m = base.extend([Term("cubic_stiffness", "pow", "v", "a", var="x", power=3)], {"a": -2.0})
+    good = sim.programs(m)
+    assert good.code[0, 0] == 16 and good.code[0, 2] == 3     # x**3 as repeated multiplication
+    t = np.arange(50) * 0.01
+    U = np.sin(t)[:, None]
+
+    def run(pr):
+        monkeypatch.setattr(sim, "_programs_cached", lambda model: pr)
+        return simulate_states(m, t, U, np.zeros(2))
+    assert np.all(np.isfinite(run(good).X))
+    bad = []
+    for row, col, value in ((0, 1, good.size), (1, 3, 0), (0, 2, 9)):
+        code = good.code.copy()
+        code[row, col] = value
+        bad.append(dc_replace(good, code=code))
+    progs = good.progs.copy()
+    progs[0, 4] = good.size
+    bad.append(dc_replace(good, progs=progs))
+    for pr in bad:
+        with pytest.raises(ValueError, match="refers past"):
+            run(pr)
