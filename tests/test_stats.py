@@ -189,3 +189,19 @@ def test_sup_lr_break_p_matches_andrews_table_and_a_brownian_bridge():
         approx = sup_lr_break_p(c, trim)
         assert mc <= approx <= 1.3 * mc + 0.002, (c, mc, approx)
     assert sup_lr_break_p(0.5, trim) == 1.0 and sup_lr_break_p(float("inf"), trim) == 0.0
+
+
+def test_ar_prediction_error_filter_matches_scipy_lfilter():
+    """v_t = x_t − Σ a_i x_{t−i} (the GLS prewhitening of the added-terms test), computed block by block,
+    equals scipy's FIR filter [1, −a_1, …, −a_p] from sample p on, for one and several columns, records
+    whose length is not a multiple of the block, and no lag at all."""
+    from scipy.signal import lfilter
+    from pipeline.diagnostics.stats import _ar_filter
+    rng = np.random.default_rng(3)
+    for shape, p, rows in (((10_001,), 3, 4096), ((9_000, 4), 10, 4096), ((257, 2), 2, 16), ((50, 3), 0, 4096)):
+        x = rng.standard_normal(shape).cumsum(axis=0)
+        a = rng.uniform(-0.4, 0.4, p)
+        ref = lfilter(np.concatenate([[1.0], -a]), [1.0], x, axis=0)[p:]
+        got = _ar_filter(x, a, rows=rows)
+        assert got.shape == ref.shape
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(x).max())
