@@ -41,8 +41,9 @@ def test_a_dead_time_with_a_spring_ends_as_the_delay_not_a_lag(tmp_path):
     model). Since ``unmodeled_dynamics`` also proposes a coupled state, its model prior spreads over
     more places (2 ln places) and the forward pass names the delay itself; the zoh switch then gains
     nothing over foh and is dropped, and the delay is the whole 0.1 s. (No seed of 2009–2089 still
-    names the lag first and swaps it; 2044, 2051 and 2063 keep a lag beside the delay, before and after
-    this change. The swap itself is exercised below, a lag and a delay each replaced by the switch.)"""
+    names the lag first and swaps it; on 2044, 2051 and 2063 the lag stays beside the delay until the
+    backward step drops it, below. The swap itself is exercised below, a lag and a delay each replaced
+    by the switch.)"""
     d = _diagnosis(record(tmp_path, "delay-cubic-2009", 2009, tau=0.1, k3=3.0))
     by = {f["family"]: f for f in d["findings"]}
     assert set(by) >= {"input_delay", "cubic_stiffness"}
@@ -52,6 +53,24 @@ def test_a_dead_time_with_a_spring_ends_as_the_delay_not_a_lag(tmp_path):
     assert -by["cubic_stiffness"]["coefficient"] == pytest.approx(3.0, rel=0.05)
     moves = {m["move"]: m for m in d["revisit"]}
     assert "swap" not in moves and moves["drop"]["family"] == "intersample"
+
+
+@pytest.mark.parametrize("seed", [2044, 2051, 2063])
+def test_a_lag_that_the_later_delay_makes_redundant_is_dropped(tmp_path, seed):
+    """A dead time and a cubic spring, seeds where the first round names a first-order input lag (the
+    delay's validation gain is not bounded away from 0 while the spring is missing), then the spring,
+    then the delay. With the spring and the delay in the model the lag adds nothing: against that model
+    refitted without it, its validation gain's interval reaches 0 or lies below it. The backward
+    elimination (``revisit.drop``) removes it, so the findings are the record's two causes, the delay
+    within issue 8's 1.5 samples. Before it, the three findings were lag, spring and delay."""
+    d = _diagnosis(record(tmp_path, f"delay-cubic-{seed}", seed, tau=0.1, k3=3.0))
+    by = {f["family"]: f for f in d["findings"]}
+    assert set(by) == {"input_delay", "cubic_stiffness"}
+    assert abs(by["input_delay"]["delay_s"] - 0.1) <= 1.5 * DT
+    assert -by["cubic_stiffness"]["coefficient"] == pytest.approx(3.0, rel=0.2)
+    drops = [m for m in d["revisit"] if m["move"] == "drop"]
+    assert [m["family"] for m in drops] == ["unmodeled_dynamics"]
+    assert "no longer earns its place" in drops[0]["detail"]
 
 
 @pytest.mark.parametrize("seed,effects", [(2007, dict(tau=0.1, d=0.2)), (2007, dict(tau=0.1, k3=3.0))])
