@@ -418,8 +418,8 @@ def kernel_source(model: Model) -> str:
     assign += [f"    d{i} = 0.0" for i in range(len(rhs), nx)]
     # the generic kernel keeps the state, the stage state and the input in scalar locals too (xs_i, a_i,
     # u_i) and evaluates the nominal right-hand side on them when the model has no program; with programs
-    # it copies the stage into the arrays the interpreter reads (xt, ui, ue) and evaluates the nominal
-    # right-hand side there, in the interpreter's order. Array loops of run-time length and numba calls
+    # it copies the stage into the value vector V the register code reads (:func:`layout`) and evaluates
+    # the nominal right-hand side there, in the interpreter's order. Array loops of run-time length and numba calls
     # with array arguments (each one reference-counted) cost it half its time before (Silverbox, one
     # interpreted term: 12.7 -> 9.2 ms); the floating-point operations are the same, in the same order.
     L = layout(nx, nu, 0)
