@@ -197,7 +197,8 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
             "adequacy": _test_rows(diag.adequacy, "final model, estimation data (structural adequacy)"),
             "adequacy_nominal": _test_rows(diag.adequacy_nominal, "nominal model, estimation data (structural adequacy)"),
             "unexplained": None if diag.where is None else {
-                **diag.where, "families_tried": _tried(diag.history, {f["family"] for f in diag.findings}),
+                **diag.where, "families_tried": _tried(diag.history, {f["family"] for f in diag.findings},
+                                                   diag.revisit or []),
                 "why": why_unexplained(diag.history, diag.adequacy)},
             "not_testable": _not_testable(diag.history),
             "families_tested": families_of(lc), "families_not_available": ignored,
@@ -214,19 +215,28 @@ TAKEN = "accepted"
 NOT_TAKEN = "met the acceptance rule in its round, not taken: another extension explained more"
 
 
-def _tried(history: list[dict], found: set[str] = frozenset()) -> list[dict]:
+def _tried(history: list[dict], found: set[str] = frozenset(), moves: list[dict] = ()) -> list[dict]:
     """Per family, the last reason it was not taken, from the diagnosis history; "accepted" for a
     family among the findings (``found``; a later round's "not significant" of its remaining
     hypotheses does not undo a finding). A candidate's own reason "accepted" means it met the
-    acceptance rule; for a family that is not a finding that reads :data:`NOT_TAKEN`."""
+    acceptance rule; for a family that is not a finding that reads :data:`NOT_TAKEN`, or, when the
+    backward step removed its finding (``moves``: ``diagnosis.revisit``, a swap or a drop), what the
+    step did."""
     out: dict[str, str] = {}
     for it in history:
         for c in it.get("candidates", []):
             out[c["family"]] = c.get("reason") or ""
         for sk in it.get("skipped", []):
             out.setdefault(sk["family"], sk["reason"])
-    return [{"family": f, "reason": TAKEN if f in found else (NOT_TAKEN if r == TAKEN else r)}
-            for f, r in out.items()]
+    removed = {m["family"]: m["short"] for m in moves if m.get("family") and m["family"] not in found}
+
+    def reason(f: str, r: str) -> str:
+        if f in found:
+            return TAKEN
+        if f in removed:
+            return f"{TAKEN}, then removed by the backward step: {removed[f]}"
+        return NOT_TAKEN if r == TAKEN else r
+    return [{"family": f, "reason": reason(f, r)} for f, r in out.items()]
 
 
 def _not_testable(history: list[dict]) -> list[dict]:

@@ -175,3 +175,21 @@ def test_families_tried_keeps_an_accepted_family_accepted():
     ]
     got = {r["family"]: r["reason"] for r in _tried(history, {"unmodeled_dynamics"})}
     assert got == {"unmodeled_dynamics": "accepted", "state_saturation": NOT_TAKEN, "offset": "refit failed: diverged"}
+
+
+
+def test_families_tried_says_when_the_backward_step_removed_a_finding():
+    """A family accepted in its round whose finding the backward step dropped (a lag made redundant by a
+    later delay) or swapped out is neither "accepted" nor "not taken: another extension explained
+    more": it says what the step did. A family that is still a finding stays "accepted"."""
+    from pipeline.runs import _tried
+    history = [{"candidates": [{"family": "unmodeled_dynamics", "reason": "accepted"},
+                               {"family": "offset", "reason": "accepted"}]},
+               {"candidates": [{"family": "cubic_stiffness", "reason": "accepted"}]},
+               {"candidates": [{"family": "input_delay", "reason": "accepted"}]}]
+    moves = [{"move": "drop", "family": "unmodeled_dynamics", "short": "unmodeled_dynamics:u@1dt dropped"},
+             {"move": "swap", "family": "offset", "short": "output_offset:x in place of offset:v"}]
+    got = {r["family"]: r["reason"] for r in _tried(history, {"cubic_stiffness", "input_delay", "output_offset"}, moves)}
+    assert got["unmodeled_dynamics"] == "accepted, then removed by the backward step: unmodeled_dynamics:u@1dt dropped"
+    assert got["offset"] == "accepted, then removed by the backward step: output_offset:x in place of offset:v"
+    assert got["cubic_stiffness"] == got["input_delay"] == "accepted"
