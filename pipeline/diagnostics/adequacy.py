@@ -250,15 +250,31 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     return out
 
 
-def feedback_test(fit, prob, alpha: float) -> stats.TestResult | None:
+def feedback_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     """Input–residual correlation at negative lags (the residual leads the input): a sign that the
     input was computed from the output, i.e. closed-loop data (MATLAB ``advice`` reports it). Then the
     residual is not independent of the input and output-error estimates of a wrong model are biased
-    toward what the controller makes likely; informational, not part of the adequacy decision."""
+    toward what the controller makes likely; informational, not part of the adequacy decision.
+
+    One row per output × excited input (a loop may close on one input only, or through one output); the
+    first output with the first excited input keeps the plain name ``feedback_crosscorrelation``, the
+    others are tagged ``[u->y]`` as the residual battery's pair rows are (:func:`residual_tests`). Each
+    row's p-value is Bonferroni over its negative lags, with the normal approximation of the lag
+    correlations (Ljung 1999, §16.6); like the battery's pair rows, each is a test at α of its pair."""
     sl = prob.split.est_slice()
-    if prob.U.shape[1] == 0 or np.ptp(prob.U[sl, 0]) == 0:
-        return None
-    lags, c, band = stats.crosscorr(fit.resid_est[:, 0], prob.U[sl, 0], 25, 1 - alpha)
+    excited = [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
+    out = []
+    for i in range(fit.resid_est.shape[1]):
+        for j in excited:
+            t = _feedback_row(fit.resid_est[:, i], prob.U[sl, j], alpha)
+            if i > 0 or j != excited[0]:
+                t.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
+            out.append(t)
+    return out
+
+
+def _feedback_row(e: np.ndarray, u: np.ndarray, alpha: float) -> stats.TestResult:
+    lags, c, band = stats.crosscorr(e, u, 25, 1 - alpha)
     neg = lags < 0
     sd = band / norm.ppf(1 - alpha / 2)
     worst = float(np.max(np.abs(c[neg])))

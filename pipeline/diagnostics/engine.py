@@ -48,7 +48,7 @@ from .families.base import Family
 from .families.periodic_disturbance import (family_p_value as periodic_p_value, line_test_p as periodic_line_p,
                                             n_lines as periodic_n_lines)
 from .cusum import cusum_squares_test, cusum_test
-from .adequacy import MATERIAL_R2, adequacy_tests, feedback_test, material, structurally_adequate, where_it_fails
+from .adequacy import MATERIAL_R2, adequacy_tests, feedback_tests, material, structurally_adequate, where_it_fails
 from .form import Accepted, form_test
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
@@ -1634,9 +1634,7 @@ class Diagnoser:
             verdict = ("unexplained_discrepancy" if rejected and not (colour_only and noise_skipped)
                        else "no_significant_discrepancy")
         where = where_it_fails(current, prob, adequacy + final_tests) if verdict == "unexplained_discrepancy" else None
-        fb = feedback_test(nominal, prob, self.alpha)
-        if fb is not None:
-            tests0 = list(tests0) + [fb]
+        tests0 = list(tests0) + feedback_tests(nominal, prob, self.alpha)
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
                          adequacy=adequacy, adequacy_nominal=nominal_adequacy,
                          verdict=verdict, where=where, revisit=moves)
