@@ -705,7 +705,7 @@ class Diagnoser:
                                                 "frequencies searched (Bonferroni)"})
                 best.p_family = periodic_p_value(best.p_family, fisher.p_value, n_freq)
             if fam == "input_delay":
-                best.evidence.append(self._xcorr_lag(fit, best.hyp.input))
+                best.evidence += [self._xcorr_lag(fit, best.hyp.input, i) for i in range(len(self.prob.out_names))]
             ee = self._equation_error_evidence(fit, best.hyp)
             if ee:
                 best.evidence.append(ee)
@@ -993,14 +993,15 @@ class Diagnoser:
             out = cand
         return out
 
-    def _xcorr_lag(self, fit: FitResult, input_name: str | None = None) -> dict:
-        """Lag (samples, parabola-refined) that maximises the cross-correlation of the measured output
-        with the nominal simulation on the estimation part: > 0 when the measurement lags the
-        simulation, i.e. a dead time. p-value: the residual–input cross-correlation test, with the
-        delayed input (the first when every input is)."""
+    def _xcorr_lag(self, fit: FitResult, input_name: str | None = None, i: int = 0) -> dict:
+        """Lag (samples, parabola-refined) that maximises the cross-correlation of measured output ``i``
+        with its nominal simulation on the estimation part: > 0 when the measurement lags the
+        simulation, i.e. a dead time. p-value: the residual–input cross-correlation test of that output,
+        with the delayed input (the first when every input is). The first output's row has the plain
+        name, the others' are tagged ``[y]``."""
         sl = self.prob.split.est_slice()
-        y = self.prob.Y[sl, 0] - self.prob.Y[sl, 0].mean()
-        yh = fit.Yhat[sl, 0] - fit.Yhat[sl, 0].mean()
+        y = self.prob.Y[sl, i] - self.prob.Y[sl, i].mean()
+        yh = fit.Yhat[sl, i] - fit.Yhat[sl, i].mean()
         n = len(y)
         kmax = max(1, min(int(round(self.max_delay / self.dt)), n // 4))
         # zero-padded to a fast FFT length ≥ 2N (any length ≥ 2N − 1 gives the linear correlation; 2N
@@ -1015,8 +1016,9 @@ class Diagnoser:
             den = c[k - 1] - 2 * c[k] + c[k + 1]
             shift = float(np.clip(0.5 * (c[k - 1] - c[k + 1]) / den, -0.5, 0.5)) if den != 0 else 0.0
         j = fit.model.inputs.index(input_name) if input_name else 0
-        xc = stats.input_crosscorr(fit.resid_est[:, 0], self.prob.U[sl, j], 25, self.alpha)
-        return {"test": "output_simulation_crosscorrelation_lag", "statistic": float(lags[k] + shift),
+        xc = stats.input_crosscorr(fit.resid_est[:, i], self.prob.U[sl, j], 25, self.alpha)
+        tag = f"[{self.prob.out_names[i]}]" if i else ""
+        return {"test": f"output_simulation_crosscorrelation_lag{tag}", "statistic": float(lags[k] + shift),
                 "p_value": xc.p_value, "detail": "lag in samples (biased toward 0: the fitted nominal partly compensates a delay); "
                           "p from the residual-input cross-correlation"}
 
