@@ -515,13 +515,18 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             raise RefitAbandoned(f"abandoned after {calls[0]} simulations: its error stayed at "
                                  f"{calls[1] / abandon_above:.3g} x the current model's or more")
 
+    start_r = [None]   # the start's residual: scipy evaluates the start again, the simulation is reused
+
     def resid(th):
-        m, x0 = unpack(th)
-        Yh = simulate_until(m, prob, x0, stop)
-        if Yh is None or not np.all(np.isfinite(Yh[est[0]:stop])):
-            r = penalty
+        if start_r[0] is not None and np.array_equal(th, th0):
+            r = start_r[0].copy()
         else:
-            r = ((yobs - Yh[est[0]:stop]) * w * sw).ravel()
+            m, x0 = unpack(th)
+            Yh = simulate_until(m, prob, x0, stop)
+            if Yh is None or not np.all(np.isfinite(Yh[est[0]:stop])):
+                r = penalty
+            else:
+                r = ((yobs - Yh[est[0]:stop]) * w * sw).ravel()
         if abandon_above is not None and not getattr(deferred, "on", False):
             count(r)
         return r
@@ -549,6 +554,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
 
     if len(th0):
         r0 = resid(th0)
+        start_r[0] = None if r0 is penalty else r0
         if r0 is penalty:
             m0, x00 = unpack(th0)
             a, b = prob.fit_segment()

@@ -337,6 +337,9 @@ class Diagnoser:
         self.w = prob.weights
         self._intersample_dropped: set[str] = set()
         self._probe_best: dict[int, tuple] = {}   # id(fit) -> (fit, probe hypothesis, its test): state_probe
+        # (id(fit), id(hypothesis), id(its test)) -> (fit, hypothesis, test, refit): likelihood-ratio screen
+        # refits that were not taken, for :meth:`estimate` (the objects are held so their ids stay unique)
+        self._screen_refits: dict[tuple, tuple] = {}
         # the last candidates() round's (fit, context, families, test results), for second_chance; None
         # once its lazy screen has run
         self._round: tuple | None = None
@@ -614,6 +617,18 @@ class Diagnoser:
                                 abandon_after=REFIT_BUDGET_ITERATIONS * (len(m.free) + 2))
 
     def estimate(self, fit: FitResult, cand: Candidate) -> FitResult | None:
+        """The candidate's extension refitted on ``fit``: the family's own ``estimate`` or :meth:`refit`.
+        Both read only the hypothesis and its added-term test and write only ``cand.reason``, so a
+        likelihood-ratio screen's refit of the same hypothesis from the same test on the same fit, not
+        taken by :meth:`_lr_screen`, is this result: it is returned (with its reason) instead of being
+        computed again (on Silverbox a delay profile and its refit in each of two rounds, about 120
+        simulations)."""
+        hit = self._screen_refits.pop((id(fit), id(cand.hyp), id(cand.wald)), None)
+        if hit is not None:
+            f, why = hit[-2:]
+            if why:
+                cand.reason = why
+            return f
         fam = REGISTRY[cand.hyp.family]
         try:
             if hasattr(fam, "estimate"):
@@ -633,6 +648,7 @@ class Diagnoser:
 
     def candidates(self, fit: FitResult, f_hz: float | None, fisher: stats.TestResult,
                    first_round: bool = False) -> tuple[list[Candidate], list]:
+        self._screen_refits.clear()       # a round's screen refits serve that round's candidates only
         ctx = self.context(fit, f_hz, first_round)
         out = []
         fams = [(fam, REGISTRY[fam].hypotheses(ctx)) for fam in self.families
@@ -777,7 +793,7 @@ class Diagnoser:
             done = dict(zip([id(h) for h in lazy], pool.map(lambda h: self._lr_refit(fit, h, ctx.X), lazy)))
         res = dict(results)
         res.update({k: wr for k, (wr, _) in done.items()})
-        refits = {k: f for k, (_, f) in done.items()}
+        refits = {k: fr for k, (_, fr) in done.items()}
         for fam, hyps in fams:
             if not any(h.info.get("lr_lazy") for h in hyps):
                 continue
@@ -943,11 +959,13 @@ class Diagnoser:
             f"({lr.detail})", r2=max(share, 0.0))
 
     def _lr_refit(self, fit: FitResult, h: Hypothesis, X: np.ndarray) -> tuple:
-        """(Wald result, refit) of an ``lr_screen`` hypothesis: its added-term test, and the family's refit
-        started from that test's estimate."""
+        """(Wald result, (refit, reason)) of an ``lr_screen`` hypothesis: its added-term test, and the
+        family's refit started from that test's estimate, with the reason the refit gave when it set one
+        (a failed refit's)."""
         S = self.sensitivity(fit, h, X)
         wr = None if S is None else self.statistic(fit, S)
-        return wr, self.estimate(fit, Candidate(h, wr, 1.0, []))
+        c = Candidate(h, wr, 1.0, [])
+        return wr, (self.estimate(fit, c), c.reason)
 
     def _lr_screen(self, fit: FitResult, fam: str, hyps: list, results: dict, best: Candidate,
                    done: dict | None = None) -> Candidate:
@@ -969,12 +987,13 @@ class Diagnoser:
         for lr_h in lr_hs:
             wr = results.get(id(lr_h))
             cand = Candidate(lr_h, wr, 1.0, [])
-            f = done[id(lr_h)] if done and id(lr_h) in done else self.estimate(fit, cand)
+            f, why = done[id(lr_h)] if done and id(lr_h) in done else (self.estimate(fit, cand), cand.reason)
             # the LR route is for a large effect whose linearised test lacks power: a refit explaining
             # less than the adequacy threshold of the residual is not one, and there the effective sample
             # size from the lag-1 autocorrelation can overstate the evidence of a residual coloured at
             # longer lags (a jump fitted to 0.24 % of a Coulomb model's residual: LR p = 6e-5)
             if f is None or f.sse_w > (1.0 - MATERIAL_R2) * fit.sse_w:
+                self._screen_refits[(id(fit), id(lr_h), id(wr))] = (fit, lr_h, wr, f, why)
                 continue
             if lr_h.info.get("lr_law") == "break":
                 lr = lr_against(fit, f, self.alpha, break_trim=float(lr_h.info["trim"]))
@@ -982,6 +1001,7 @@ class Diagnoser:
                 lr = lr_against(fit, f, self.alpha, len(lr_h.searched) + int(lr_h.info.get("lr_extra_dof", 0)))
             p = min(1.0, k * lr.p_value)
             if p >= out.p_family:
+                self._screen_refits[(id(fit), id(lr_h), id(wr))] = (fit, lr_h, wr, f, why)
                 continue
             cand.fit, cand.p_family = f, p
             if wr is not None:
