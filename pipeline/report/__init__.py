@@ -38,6 +38,12 @@ def _chain_labels(ctx) -> list[str]:
     return (names + [f"model {k}" for k in range(len(names), n)])[:n]
 
 
+def _excited(ctx) -> list[int]:
+    """Indices of the model inputs that move on the estimation part (the model-error model's inputs)."""
+    es = ctx.prob.split.est_slice()
+    return [j for j in range(len(ctx.model.inputs)) if np.ptp(ctx.prob.U[es, j]) > 0]
+
+
 def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
     diag, prob = ctx.diag, ctx.prob
     fits = diag.fits
@@ -52,18 +58,19 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
     if len(fits) > 1:      # with the nominal model alone these would repeat the figures above
         jobs.insert(2, ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)))
         jobs.append(("corr_final", lambda: figures.correlations(ctx, diag.final, alpha)))
-    if ctx.model.inputs:
-        es = prob.split.est_slice()
-        u = prob.U[es, 0]
-
+    es = prob.split.est_slice()
+    excited = _excited(ctx)
+    if excited:
         def emm():
             rows = []
-            for i, out in enumerate(prob.out_names):    # one panel per output, from the first input
-                items = [(labels[0], analysis.error_model(diag.nominal.resid_est[:, i], u, ctx.rec.dt))]
-                if len(fits) > 1:
-                    items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, i], u, ctx.rec.dt)))
-                rows.append((out, items))
-            return figures.error_model_plot(rows, ctx.model.inputs[0], units)
+            for i, out in enumerate(prob.out_names):    # one panel per output × excited input
+                for j in excited:
+                    u = prob.U[es, j]
+                    items = [(labels[0], analysis.error_model(diag.nominal.resid_est[:, i], u, ctx.rec.dt))]
+                    if len(fits) > 1:
+                        items.append((labels[-1], analysis.error_model(diag.final.resid_est[:, i], u, ctx.rec.dt)))
+                    rows.append((out, ctx.model.inputs[j], items))
+            return figures.error_model_plot(rows, units)
         jobs.append(("error_model", emm))
     jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal, region_critical(diag.nominal.identifiability, 2))))
     for k, fit in enumerate(fits[1:]):
@@ -156,5 +163,6 @@ def render_report(ctx) -> str:
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
         nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final), n_out=len(ctx.prob.out_names),
+        n_pairs=len(ctx.prob.out_names) * len(_excited(ctx)),
         fir_order=FIR_ORDER,
         band_draws=BAND_DRAWS)

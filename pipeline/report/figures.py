@@ -189,23 +189,26 @@ def correlations(ctx, fit, alpha: float) -> str:
     return _png(fig)
 
 
-def error_model_plot(rows: list[tuple[str, list[tuple[str, "analysis.ErrorModel"]]]], in_name: str,
+def error_model_plot(rows: list[tuple[str, str, list[tuple[str, "analysis.ErrorModel"]]]],
                      units: dict[str, str]) -> str | None:
-    """|G(f)| of the model-error model (FIR from the input to the residual) with its 99 % band: one panel
-    per output (``rows``: (output name, [(model label, error model)])."""
-    rows = [(out, [(lab, em) for lab, em in items if em is not None]) for out, items in rows]
-    rows = [(out, items) for out, items in rows if items]
+    """|G(f)| of the model-error model (FIR from an input to the residual) with its 99 % band: one panel
+    per output × input pair (``rows``: (output name, input name, [(model label, error model)])), titled
+    with the pair when there is more than one."""
+    rows = [(out, inp, [(lab, em) for lab, em in items if em is not None]) for out, inp, items in rows]
+    rows = [(out, inp, items) for out, inp, items in rows if items]
     if not rows:
         return None
-    ny = len(rows)
-    fig, axes = _fig(ny, 1, figsize=(WIDTH_IN, 2.8 if ny == 1 else 2.5 * ny + 0.3), squeeze=False)
-    for ax, (out_name, items) in zip(axes[:, 0], rows):
+    n = len(rows)
+    fig, axes = _fig(n, 1, figsize=(WIDTH_IN, 2.8 if n == 1 else 2.5 * n + 0.3), squeeze=False)
+    for ax, (out_name, in_name, items) in zip(axes[:, 0], rows):
         for (lab, em), col in zip(items, COLORS):
             ax.plot(em.f_hz, em.mag, color=col, lw=1.0, label=f"{lab}: |G|")
             ax.fill_between(em.f_hz, np.clip(em.mag - em.band, 0, None), em.mag + em.band, color=col, alpha=0.2,
                             lw=0, label=f"{lab}: 99 % band")
         uu, yu = units.get(in_name), units.get(out_name)
         ax.set_ylabel(f"|G| [{yu}/{uu}]" if uu and yu else f"|G| [{out_name} per {in_name}]")
+        if n > 1:
+            ax.set_title(f"from {in_name} to the residual of {out_name}", fontsize=9)
         ax.set_xlim(0, items[0][1].f_hz[-1])
     axes[-1, 0].set_xlabel("frequency [Hz]")
     _legend_above(axes[0, 0], ncol=4)

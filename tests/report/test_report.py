@@ -338,10 +338,10 @@ def test_residual_figures_show_every_output(monkeypatch):
     assert [lab for lab in seen[0] if lab.startswith("y − ŷ")] == ["y − ŷ: T1 [data units]", "y − ŷ: T2 [data units]"]
     titles = seen[1]
     assert len(titles) == 6 and sum(x.startswith("T1: ") for x in titles) == 3 and sum(x.startswith("T2: ") for x in titles) == 3
-    # the model-error model: one panel per output
-    rows = [(out, [("nominal", analysis.error_model(fit.resid_est[:, i], U[:400, 0], 0.1))])
+    # the model-error model: one panel per output (and per input, below)
+    rows = [(out, "u", [("nominal", analysis.error_model(fit.resid_est[:, i], U[:400, 0], 0.1))])
             for i, out in enumerate(prob.out_names)]
-    figures.error_model_plot(rows, "u", {})
+    figures.error_model_plot(rows, {})
     assert seen[2] == ["|G| [T1 per u]", "|G| [T2 per u]"]
 
 
@@ -368,3 +368,29 @@ def test_error_model_band_holds_on_a_band_limited_input_and_a_smooth_residual():
         assert em.f_hz[-1] <= 999 ** (1 / 8) + 20 / 256
     assert np.mean(cover) >= 0.9
     assert max(peak) < 1.0                          # nothing like the 1e5 of the ill-conditioned fit
+
+
+def test_model_error_model_has_a_panel_for_every_output_and_input(tmp_path, monkeypatch):
+    """Issue 8 (every output and input): the model-error figure was drawn from the first input only; on a
+    two-input, two-output record (solve_ivp, the dead time on u2 alone, which the nominal model misses)
+    it has one panel per pair, and the u2 panels of the nominal model are where the band leaves zero."""
+    from pipeline.report import figures
+    from tests.diagnosis.test_delay_per_input import DT, _config, _record
+
+    _record(tmp_path / "two.csv", (0.0, 3.6 * DT), 12)
+    cfg = yaml.safe_load(_config(tmp_path, "two").read_text())
+    cfg["diagnose"] = {"families": ["offset"], "max_findings": 1}
+    (tmp_path / "two.yaml").write_text(yaml.safe_dump(cfg))
+    seen = []
+    real = figures.error_model_plot
+    monkeypatch.setattr(figures, "error_model_plot", lambda rows, units: seen.append(rows) or real(rows, units))
+    assert main(["report", str(tmp_path / "two.yaml"), "--out", str(tmp_path / "run")]) == 0
+    [rows] = seen
+    assert [(out, inp) for out, inp, _ in rows] == [("T1", "u1"), ("T1", "u2"), ("T2", "u1"), ("T2", "u2")]
+    html = (tmp_path / "run" / "report.html").read_text(encoding="utf-8")
+    assert "One panel per output and input." in html
+
+    def excess(out, inp):     # the nominal model's largest |G| beyond its 99 % band
+        em = next(items for o, i, items in rows if (o, i) == (out, inp))[0][1]
+        return float(np.max(em.mag - em.band))
+    assert excess("T2", "u2") > 0 and excess("T2", "u2") > excess("T2", "u1")
