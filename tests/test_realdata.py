@@ -54,6 +54,14 @@ def test_silverbox_names_cubic_stiffness_and_extended_model_reaches_1_5_mV(tmp_p
     d = s["diagnosis"]
     if d["verdict"] == "unexplained_discrepancy":
         assert d["unexplained"]["failed_tests"] and d["unexplained"]["families_tried"]
+    # the history says which candidate each iteration took: the others that met the acceptance rule in
+    # the first iteration (x*abs(x) and the state limit beside the cubic) read "not taken", not "accepted"
+    first = d["history"][0]["candidates"]
+    met = [c for c in first if c["accepted"]]
+    assert len(met) >= 2
+    assert [c["hypothesis"] for c in met if c["reason"] == "accepted"] == ["cubic_stiffness:v:x"]
+    assert all(c["reason"] == "met the acceptance rule, not taken: iteration 1 took cubic_stiffness:v:x"
+               for c in met if c["hypothesis"] != "cubic_stiffness:v:x")
 
 
 @pytest.mark.realdata

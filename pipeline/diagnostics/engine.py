@@ -1530,6 +1530,7 @@ class Diagnoser:
             # raw differences grow as (1 + ρ)/(1 − ρ) on coloured residuals (inter_wins)
             if inter is not None and self.inter_wins(inter, best, rnd.n_eff, current):
                 findings.append(inter[1])
+                history[-1] = self._not_taken(rnd, it, f"intersample {inter[1].get('chosen')}")
                 links.append(Link("intersample", current, self._accepted(inter[0])))
                 current = links[-1].after
                 switched = True
@@ -1550,6 +1551,8 @@ class Diagnoser:
                 done_until = it + 2
             findings.append(self.finding(best, [c for c in cands if c is not best and c.gain is not None
                                                 and c.delta_bic_eff is not None]))
+            if done_until != it + 2:
+                history[-1] = self._not_taken(rnd, it, best.hyp.key)
             links.append(Link("look-ahead" if done_until == it + 2 else "extension", current,
                               self._accepted(best.fit), best, self._alternatives(best, cands)))
             current = links[-1].after
@@ -1660,6 +1663,20 @@ class Diagnoser:
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
                          adequacy=adequacy, adequacy_nominal=nominal_adequacy,
                          verdict=verdict, where=where, revisit=moves)
+
+    @staticmethod
+    def _not_taken(rnd: Round, it: int, taken: str) -> dict:
+        """The round's history row once its extension is chosen: a candidate (or an intersample
+        alternative) that met the acceptance rule but was not the one taken says so, where its reason
+        read "accepted" as if it were a finding (Silverbox's first round listed three)."""
+        why = f"met the acceptance rule, not taken: iteration {it + 1} took {taken}"
+        for c in rnd.cands:
+            if c.accepted and c.hyp.key != taken:
+                c.reason = why
+        for row in (rnd.inter_history or {}).get("candidates", []):
+            if row.get("accepted") and f"intersample {row.get('hypothesis')}" != taken:
+                row["reason"] = why
+        return rnd.record(it)
 
     def inter_wins(self, inter: tuple, best: Candidate | None, n_eff: float | None, current: FitResult) -> bool:
         """Is the intersample switch (``inter``: its fit and finding) chosen over the round's best physical
