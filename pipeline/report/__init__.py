@@ -107,7 +107,7 @@ def _uncertainty(ctx, units: dict) -> dict:
         idx = np.linspace(0, len(post.samples) - 1, BAND_DRAWS).astype(int)
         draws, what = post.samples[idx], "emcee posterior draws"
     else:
-        draws, what = analysis.gauss_draws(diag.final, BAND_DRAWS, cfg.seed), "Gauss N(θ̂, P) draws"
+        draws, what = analysis.parameter_draws(diag.final, BAND_DRAWS, cfg.seed) or (None, None)
     if draws is not None:
         lohi = analysis.response_band(diag.final, ctx.prob, draws)
         if lohi is not None:

@@ -394,3 +394,33 @@ def test_model_error_model_has_a_panel_for_every_output_and_input(tmp_path, monk
         em = next(items for o, i, items in rows if (o, i) == (out, inp))[0][1]
         return float(np.max(em.mag - em.band))
     assert excess("T2", "u2") > 0 and excess("T2", "u2") > excess("T2", "u1")
+
+
+@pytest.mark.parametrize("nu", [None, 2.0, 6.0, 0.4])
+def test_response_band_draws_follow_the_law_of_the_parameter_intervals(nu):
+    """The response band's parameter draws have the marginal law of the θ̂ ± t·σ intervals: Student's
+    t with the sandwich covariance's ν (floored at 1, as the intervals' quantile is), Gauss without ν.
+    Gauss draws with ν = 2 put 95 % of a parameter within ±1.96σ where its interval is ±4.3σ.
+    Monte Carlo against scipy's t and normal quantiles, and the intervals cover 95 % of the draws."""
+    from types import SimpleNamespace
+
+    from scipy import stats as sps
+
+    from pipeline.fit import param_intervals
+
+    theta = np.array([1.0, -2.0, 0.5])
+    sd = np.array([0.1, 0.3, 0.02])
+    corr = np.array([[1.0, 0.6, -0.3], [0.6, 1.0, 0.2], [-0.3, 0.2, 1.0]])
+    fit = SimpleNamespace(theta=theta, cov=corr * np.outer(sd, sd), std=sd,
+                          identifiability=None if nu is None else SimpleNamespace(cov_dof=nu))
+    draws, what = analysis.parameter_draws(fit, 40_000, seed=3)
+    z = (draws - theta) / sd
+    q = sps.norm.ppf(0.975) if nu is None else sps.t.ppf(0.975, max(nu, 1.0))
+    for i in range(3):
+        assert np.quantile(np.abs(z[:, i]), 0.95) == pytest.approx(q, rel=0.05)
+    lo, hi = np.array(param_intervals(fit)).T
+    inside = np.mean((draws > lo) & (draws < hi), axis=0)
+    assert np.all(np.abs(inside - 0.95) < 0.006), inside
+    assert what.startswith("Gauss") == (nu is None)
+    # the draws are the config seed's: the same seed, the same band
+    assert np.array_equal(analysis.parameter_draws(fit, 40, seed=3)[0], analysis.parameter_draws(fit, 40, seed=3)[0])
