@@ -264,20 +264,22 @@ def corner(fit, level_chi2: float = CHI2_2_95, posterior=None, title_level: str 
 
 def band(ctx, fit, lohi: np.ndarray, units: dict[str, str], zoom: int = 400, what: str = "") -> str:
     """Measured vs the final model with its 95 % response band (parameter uncertainty) on the
-    validation zoom window."""
+    validation zoom window: one panel per output, each zoomed where that output's misfit is largest."""
     prob = ctx.prob
     sl = prob.split.val_slice()
     t = prob.t[sl]
-    y = prob.Y[sl, 0]
-    a, b = analysis.zoom_window(y - fit.Yhat[sl, 0], zoom)
-    fig, ax = _fig(1, 1, figsize=(WIDTH_IN, 2.7))
-    ax.fill_between(t[a:b], lohi[0][sl, 0][a:b], lohi[1][sl, 0][a:b], color="tab:green", alpha=0.3, lw=0,
-                    label=f"95 % response band ({what})")
-    ax.plot(t[a:b], y[a:b], "k", lw=1.2, label="measured")
-    ax.plot(t[a:b], fit.Yhat[sl, 0][a:b], color="tab:green", lw=0.9, label="final model")
-    ax.set_xlabel("time [s] (validation part)")
-    ax.set_ylabel(label(prob.out_names[0], units))
-    _legend_above(ax)
+    ny = len(prob.out_names)
+    fig, axes = _fig(ny, 1, figsize=(WIDTH_IN, 2.7 if ny == 1 else 2.4 * ny + 0.3), squeeze=False)
+    for i, (ax, name) in enumerate(zip(axes[:, 0], prob.out_names)):
+        y = prob.Y[sl, i]
+        a, b = analysis.zoom_window(y - fit.Yhat[sl, i], zoom)
+        ax.fill_between(t[a:b], lohi[0][sl, i][a:b], lohi[1][sl, i][a:b], color="tab:green", alpha=0.3, lw=0,
+                        label=f"95 % response band ({what})")
+        ax.plot(t[a:b], y[a:b], "k", lw=1.2, label="measured")
+        ax.plot(t[a:b], fit.Yhat[sl, i][a:b], color="tab:green", lw=0.9, label="final model")
+        ax.set_ylabel(label(name, units))
+    axes[-1, 0].set_xlabel("time [s] (validation part)")
+    _legend_above(axes[0, 0])
     return _png(fig)
 
 

@@ -343,6 +343,10 @@ def test_residual_figures_show_every_output(monkeypatch):
             for i, out in enumerate(prob.out_names)]
     figures.error_model_plot(rows, {})
     assert seen[2] == ["|G| [T1 per u]", "|G| [T2 per u]"]
+    # the response band: one panel per output (it drew the first output only)
+    lohi = np.stack([0.5 * Y - 1.0, 0.5 * Y + 1.0])
+    figures.band(ctx, fit, lohi, {}, 100, "draws")
+    assert seen[3] == ["T1 [data units]", "T2 [data units]"]
 
 
 def test_error_model_band_holds_on_a_band_limited_input_and_a_smooth_residual():
