@@ -192,8 +192,8 @@ def correlations(ctx, fit, alpha: float) -> str:
 def error_model_plot(rows: list[tuple[str, str, list[tuple[str, "analysis.ErrorModel"]]]],
                      units: dict[str, str]) -> str | None:
     """|G(f)| of the model-error model (FIR from an input to the residual) with its 99 % band: one panel
-    per output × input pair (``rows``: (output name, input name, [(model label, error model)])), titled
-    with the pair when there is more than one."""
+    per output × input pair (``rows``: (output name, input name, [(model label, error model)])), the
+    pair named in each panel's label."""
     rows = [(out, inp, [(lab, em) for lab, em in items if em is not None]) for out, inp, items in rows]
     rows = [(out, inp, items) for out, inp, items in rows if items]
     if not rows:
@@ -206,9 +206,9 @@ def error_model_plot(rows: list[tuple[str, str, list[tuple[str, "analysis.ErrorM
             ax.fill_between(em.f_hz, np.clip(em.mag - em.band, 0, None), em.mag + em.band, color=col, alpha=0.2,
                             lw=0, label=f"{lab}: 99 % band")
         uu, yu = units.get(in_name), units.get(out_name)
-        ax.set_ylabel(f"|G| [{yu}/{uu}]" if uu and yu else f"|G| [{out_name} per {in_name}]")
-        if n > 1:
-            ax.set_title(f"from {in_name} to the residual of {out_name}", fontsize=9)
+        # the pair is in the label: with units too when there are several panels
+        ax.set_ylabel((f"{in_name} → {out_name}\n" if n > 1 else "") + f"|G| [{yu}/{uu}]" if uu and yu
+                      else f"|G| [{out_name} per {in_name}]")
         ax.set_xlim(0, items[0][1].f_hz[-1])
     axes[-1, 0].set_xlabel("frequency [Hz]")
     _legend_above(axes[0, 0], ncol=4)
