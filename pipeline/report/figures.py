@@ -152,38 +152,46 @@ def residuals(ctx, fits: list, labels: list[str], units: dict[str, str]) -> str:
 
 def correlations(ctx, fit, alpha: float) -> str:
     """Residual autocorrelation and input cross-correlation with their (1 − α) bounds, and the
-    Billings–Voon higher-order correlations with ±1.96/√N: one row per output, against the first input
-    (the tables hold every input–output pair)."""
+    Billings–Voon higher-order correlations with ±1.96/√N: one row per output and excited input (the
+    autocorrelation on each output's first row only)."""
     prob = ctx.prob
-    u = prob.U[prob.split.est_slice(), 0] if ctx.model.inputs else None
-    ny = len(prob.out_names)
-    ncol = 3 if u is not None else 2
-    fig, axes = _fig(ny, ncol, figsize=(WIDTH_IN, 2.7 * ny), squeeze=False)
+    es = prob.split.est_slice()
+    inputs = [j for j in range(len(ctx.model.inputs)) if np.ptp(prob.U[es, j]) > 0] or [None]
+    ny, nu = len(prob.out_names), len(inputs)
+    ncol = 3 if inputs[0] is not None else 2
+    rows = ny * nu
+    fig, axes = _fig(rows, ncol, figsize=(WIDTH_IN, 2.7 * rows), squeeze=False)
+    small = {"fontsize": 8.5} if rows > 1 else {}
     for i, name in enumerate(prob.out_names):
         e = fit.resid_est[:, i]
         tag = f"{name}: " if ny > 1 else ""
-        small = {"fontsize": 8.5} if ny > 1 else {}
         r, bound = rstats.autocorr(e, 25, 1 - alpha)
-        ax = axes[i, 0]
+        ax = axes[i * nu, 0]
         ax.stem(np.arange(1, 26), r[1:], basefmt=" ")
         ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15)
         ax.set_title(f"{tag}autocorrelation, bound ±{bound:.3g} ({100 * (1 - alpha):.0f} %)", **small)
-        k = 1
-        if u is not None:
-            lags, c, b = rstats.crosscorr(e, u, 25, 1 - alpha)
-            ax = axes[i, 1]
-            ax.stem(lags, c, basefmt=" ")
-            ax.axhspan(-b, b, color="tab:blue", alpha=0.15)
-            ax.set_title(f"{tag}input–residual cross-corr., ±{b:.3g}", **small)
-            k = 2
-        ho = analysis.billings_voon(e, u, 20)
-        ax = axes[i, k]
-        for (hname, cur), col in zip(ho.curves.items(), COLORS):
-            ax.plot(ho.lags, cur, ".-", lw=0.8, ms=3, color=col, label=hname)
-        ax.axhspan(-ho.bound, ho.bound, color="tab:blue", alpha=0.15)
-        ax.set_title(f"{tag}higher-order (Billings–Voon), ±{ho.bound:.3g}", **small)
-    for j in range(ncol):
-        axes[-1, j].set_xlabel("lag τ [samples]" if j == ncol - 1 else "lag [samples]")
+        for k, j in enumerate(inputs):
+            row = i * nu + k
+            if k:
+                axes[row, 0].set_visible(False)
+            u = None if j is None else prob.U[es, j]
+            pair = f"{ctx.model.inputs[j]}→{name}: " if nu > 1 else tag
+            col = 1
+            if u is not None:
+                lags, c, b = rstats.crosscorr(e, u, 25, 1 - alpha)
+                ax = axes[row, 1]
+                ax.stem(lags, c, basefmt=" ")
+                ax.axhspan(-b, b, color="tab:blue", alpha=0.15)
+                ax.set_title(f"{pair}input–residual cross-corr., ±{b:.3g}", **small)
+                col = 2
+            ho = analysis.billings_voon(e, u, 20)
+            ax = axes[row, col]
+            for (hname, cur), colour in zip(ho.curves.items(), COLORS):
+                ax.plot(ho.lags, cur, ".-", lw=0.8, ms=3, color=colour, label=hname)
+            ax.axhspan(-ho.bound, ho.bound, color="tab:blue", alpha=0.15)
+            ax.set_title(f"{pair}higher-order (Billings–Voon), ±{ho.bound:.3g}", **small)
+    for j in range(ncol):     # the autocorrelation column's last panel is the last output's first row
+        axes[(ny - 1) * nu if j == 0 else -1, j].set_xlabel("lag τ [samples]" if j == ncol - 1 else "lag [samples]")
     axes[-1, ncol - 1].legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=3, frameon=False, fontsize=8.5)
     fig.tight_layout()
     return _png(fig)

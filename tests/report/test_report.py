@@ -428,3 +428,27 @@ def test_response_band_draws_follow_the_law_of_the_parameter_intervals(nu):
     assert what.startswith("Gauss") == (nu is None)
     # the draws are the config seed's: the same seed, the same band
     assert np.array_equal(analysis.parameter_draws(fit, 40, seed=3)[0], analysis.parameter_draws(fit, 40, seed=3)[0])
+
+
+def test_correlation_figure_has_a_row_per_output_and_input(monkeypatch):
+    """With two inputs the correlation figure drew the first input's cross-correlations only (the
+    tables had every pair): one row per output and input, the autocorrelation once per output, and the
+    pair in each title."""
+    from types import SimpleNamespace
+    from pipeline.data import Split
+    from pipeline.report import figures
+    rng = np.random.default_rng(1)
+    n = 600
+    U = rng.standard_normal((n, 2))
+    Y = rng.standard_normal((n, 2))
+    prob = SimpleNamespace(t=np.arange(n) * 0.1, Y=Y, U=U, out_names=["T1", "T2"], split=Split((0, 400), (400, n)))
+    fit = SimpleNamespace(Yhat=0.5 * Y, resid_est=0.5 * Y[:400])
+    ctx = SimpleNamespace(prob=prob, model=SimpleNamespace(inputs=["u1", "u2"]))
+    seen = []
+    monkeypatch.setattr(figures, "_png", lambda fig: seen.append(
+        [ax.get_title() for ax in fig.axes if ax.get_visible()]) or "")
+    figures.correlations(ctx, fit, 0.01)
+    [titles] = seen
+    assert sum("autocorrelation" in x for x in titles) == 2
+    for pair in ("u1→T1", "u2→T1", "u1→T2", "u2→T2"):
+        assert sum(x.startswith(pair + ": ") for x in titles) == 2     # cross-correlation and Billings–Voon
