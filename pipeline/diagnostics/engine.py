@@ -337,8 +337,9 @@ class Diagnoser:
         self.w = prob.weights
         self._intersample_dropped: set[str] = set()
         self._probe_best: dict[int, tuple] = {}   # id(fit) -> (fit, probe hypothesis, its test): state_probe
-        # (id(fit), id(hypothesis), id(its test)) -> (fit, hypothesis, test, refit): likelihood-ratio screen
-        # refits that were not taken, for :meth:`estimate` (the objects are held so their ids stay unique)
+        # (id(fit), id(hypothesis), id(its test)) -> (fit, hypothesis, test, refit, its reason): likelihood-
+        # ratio screen refits that were not taken, for :meth:`estimate` (the objects are held so their ids
+        # stay unique)
         self._screen_refits: dict[tuple, tuple] = {}
         # the last candidates() round's (fit, context, families, test results), for second_chance; None
         # once its lazy screen has run
