@@ -273,6 +273,9 @@ def feedback_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     return out
 
 
+PREDICTABLE = 1e-6   # AR residual variance / input variance below which the feedback row is not tested
+
+
 def _feedback_row(e: np.ndarray, u: np.ndarray, alpha: float) -> stats.TestResult:
     """The negative-lag test of one pair on the prewhitened input and the residual filtered alike
     (Box & Jenkins 1976, §11.2.1: an AR(p ≤ 20) fitted to the input by Yule–Walker, p by AIC,
@@ -284,8 +287,17 @@ def _feedback_row(e: np.ndarray, u: np.ndarray, alpha: float) -> stats.TestResul
     open-loop correlations at negative lags vanish, and a loop that feeds the output back into the
     input still shows. An input the AR cannot whiten (its residual fails :func:`stats.whiteness`: a
     line spectrum, e.g. Silverbox's multisine, whose future is a function of its past) leaves that
-    confounding in place, and a failing row says so."""
+    confounding in place, and a failing row says so. An input the AR predicts almost exactly (less than
+    ``PREDICTABLE`` of its variance left: one or two sinusoids) is not tested: its prewhitened
+    residual is rounding noise, whose correlation bound collapsed to 0 and called a pure sine's record
+    closed loop at p = 0."""
     uw, a = stats.prewhiten_ar(u)
+    left = float(np.var(uw)) / (float(np.var(u)) or 1.0)
+    if len(a) and left < PREDICTABLE:
+        return stats.TestResult("feedback_crosscorrelation", float("nan"), float("nan"), None, False,
+                                f"not tested: the input is predictable from its past (an AR({len(a)}) leaves "
+                                f"{left:.1g} of its variance: a sum of a few sinusoids), so correlations at "
+                                "negative lags cannot tell a closed loop from an open one")
     if len(a):
         e = stats._ar_filter(np.asarray(e, float) - float(np.mean(e)), a)
         u = uw

@@ -133,3 +133,17 @@ def test_size_in_open_loop_with_coloured_input_and_noise():
         [fb] = feedback_tests(fit_output_error(m, prob), prob, 0.01)
         rejected += not fb.passed
     assert rejected <= 5, rejected
+
+
+def test_a_predictable_input_is_not_tested():
+    """A pure sine (or two) is predicted by its AR almost exactly: the prewhitened input is rounding
+    noise, whose correlation bound collapsed to 0 and made a white residual "closed loop" at p = 0.
+    The row says it was not tested instead; a square wave, which the AR does not predict, is tested."""
+    from pipeline.diagnostics.adequacy import _feedback_row
+    t = np.arange(3000) * 0.01
+    e = np.random.default_rng(0).normal(size=3000)
+    for u in (np.sin(2 * np.pi * 0.5 * t), np.sin(2 * np.pi * 0.5 * t) + 0.3 * np.sin(2 * np.pi * 1.7 * t)):
+        row = _feedback_row(e, u, 0.01)
+        assert row.detail.startswith("not tested: the input is predictable") and np.isnan(row.p_value)
+    row = _feedback_row(e, np.sign(np.sin(2 * np.pi * 0.2 * t)), 0.01)
+    assert row.passed and not row.detail.startswith("not tested")
