@@ -165,6 +165,13 @@ class FitResult:
                         {"names": list(self.names), "converged": self.success})
 
 
+def excited_inputs(prob: Problem) -> list[int]:
+    """Indices of the input columns that move on the estimation part: the inputs every input–output
+    test, evidence row and figure is computed for (a constant column excites nothing)."""
+    sl = prob.split.est_slice()
+    return [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
+
+
 def initial_state(model: Model, prob: Problem, values: dict[str, float] | None = None, at: int = 0) -> np.ndarray:
     """Resolve the initial state at sample ``at``: numbers, "data" (the measured sample there) or
     estimates (``values`` ``x0.<state>``; the measured sample as a start)."""

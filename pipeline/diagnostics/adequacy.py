@@ -54,7 +54,7 @@ import dataclasses
 import numpy as np
 from scipy.stats import chi2, norm
 
-from ..fit import simulate_until
+from ..fit import excited_inputs, simulate_until
 from . import stats
 from .coherence import input_coherence
 from .stability import parameter_stability_test
@@ -213,8 +213,7 @@ def adequacy_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     is α / (number of pairs × ``N_TESTS`` + number of outputs) (Bonferroni over the rows)."""
     sl = prob.split.est_slice()
     ny = fit.resid_est.shape[1]
-    pairs = [(i, j) for i in range(ny) for j in range(prob.U.shape[1])
-             if np.ptp(prob.U[sl, j]) > 0]
+    pairs = [(i, j) for i in range(ny) for j in excited_inputs(prob)]
     if not pairs:
         return []
     a = alpha / (N_TESTS * len(pairs) + ny)
@@ -262,7 +261,7 @@ def feedback_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     row's p-value is Bonferroni over its negative lags, with the normal approximation of the lag
     correlations (Ljung 1999, §16.6); like the battery's pair rows, each is a test at α of its pair."""
     sl = prob.split.est_slice()
-    excited = [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
+    excited = excited_inputs(prob)
     out = []
     for i in range(fit.resid_est.shape[1]):
         for j in excited:

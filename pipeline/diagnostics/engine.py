@@ -37,7 +37,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import criteria
-from ..fit import (FitResult, Problem, estimated_x0, fit_output_error, simulate_until, stable_quotient,
+from ..fit import (FitResult, Problem, estimated_x0, excited_inputs, fit_output_error, simulate_until, stable_quotient,
                    states_full)
 from ..model import Model, rhs_vectorized, switches, term_on
 from ..simulate import outputs, simulate_states
@@ -282,7 +282,7 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
     (cycles/sample) of the most significant Fisher-g peak over the outputs."""
     sl = prob.split.est_slice()
     ny = fit.resid_est.shape[1]
-    excited = [j for j in range(prob.U.shape[1]) if np.ptp(prob.U[sl, j]) > 0]
+    excited = excited_inputs(prob)
     tests, best = [], None
     for i in range(ny):
         e = fit.resid_est[:, i]

@@ -16,7 +16,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
 from ..diagnostics.adequacy import FIR_ORDER
-from ..fit import param_intervals, region_critical
+from ..fit import excited_inputs, param_intervals, region_critical
 from . import analysis, figures, view
 
 ZOOM = 400              # samples in the zoom window beside a long trace
@@ -38,12 +38,6 @@ def _chain_labels(ctx) -> list[str]:
     return (names + [f"model {k}" for k in range(len(names), n)])[:n]
 
 
-def _excited(ctx) -> list[int]:
-    """Indices of the model inputs that move on the estimation part (the model-error model's inputs)."""
-    es = ctx.prob.split.est_slice()
-    return [j for j in range(len(ctx.model.inputs)) if np.ptp(ctx.prob.U[es, j]) > 0]
-
-
 def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
     diag, prob = ctx.diag, ctx.prob
     fits = diag.fits
@@ -59,7 +53,7 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
         jobs.insert(2, ("compare_all", lambda: figures.compare(ctx, fits, labels, units, ZOOM)))
         jobs.append(("corr_final", lambda: figures.correlations(ctx, diag.final, alpha)))
     es = prob.split.est_slice()
-    excited = _excited(ctx)
+    excited = excited_inputs(prob)
     if excited:
         def emm():
             rows = []
@@ -163,6 +157,6 @@ def render_report(ctx) -> str:
         log=ctx.rec.log, structure_rows=view.model_rows(s), prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
         nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final), n_out=len(ctx.prob.out_names),
-        n_pairs=len(ctx.prob.out_names) * len(_excited(ctx)),
+        n_pairs=len(ctx.prob.out_names) * len(excited_inputs(ctx.prob)),
         fir_order=FIR_ORDER,
         band_draws=BAND_DRAWS)

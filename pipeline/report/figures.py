@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from ..diagnostics import stats as rstats  # noqa: E402
+from ..fit import excited_inputs  # noqa: E402
 from . import analysis  # noqa: E402
 
 CHI2_2_95 = float(stats.chi2.ppf(0.95, 2))  # 5.991
@@ -156,7 +157,7 @@ def correlations(ctx, fit, alpha: float) -> str:
     autocorrelation on each output's first row only)."""
     prob = ctx.prob
     es = prob.split.est_slice()
-    inputs = [j for j in range(len(ctx.model.inputs)) if np.ptp(prob.U[es, j]) > 0] or [None]
+    inputs = excited_inputs(prob) or [None]
     ny, nu = len(prob.out_names), len(inputs)
     ncol = 3 if inputs[0] is not None else 2
     rows = ny * nu
