@@ -70,6 +70,43 @@ def test_silverbox_names_cubic_stiffness_and_extended_model_reaches_1_5_mV(tmp_p
 
 
 @pytest.mark.realdata
+def test_silverbox_second_record_names_the_same_cause_and_its_model_predicts_the_arrow(tmp_path):
+    """The Silverbox's second record (Schroeder80mV: multisines over the whole record, on which nothing was
+    tuned), with the same linear nominal belief (configs/silverbox_schroeder.yaml): the cubic spring is
+    named again, and the model found on this record, simulated without refitting on the *first* record's
+    arrow (SNLS80mV, samples 0-40 400, another excitation the fit never saw), meets issue 8's arrow
+    target of 1.0 mV there, where the linear model fitted on the same record misses by more than 10 mV."""
+    import numpy as np
+    from pipeline.data import load_record, make_split, remove_means
+    from pipeline.fit import Problem, initial_state, simulate_full
+    ctx = _analyse_shipped(tmp_path, "silverbox_schroeder.yaml", "silverbox/Schroeder80mV.csv", ctx=True)
+    s = ctx.summary
+    assert s["data"]["estimation"] == [2000, 87000] and s["data"]["validation"] == [89000, 131072]
+    f = s["diagnosis"]["findings"][0]
+    assert (f["family"], f["equation"], f["term"]) == ("cubic_stiffness", "v", "x**3")
+    assert f["coefficient"] < 0 and f["gain"]["ci95"][0] > 0
+    assert s["nominal"]["validation"]["rmse_sim"] > 0.010
+    assert s["final"]["validation"]["rmse_sim"] <= 0.0010      # this record's own validation part
+    # the first record, as configs/silverbox.yaml reads it (means of its multisine part removed)
+    cfg = yaml.safe_load((ROOT / "configs" / "silverbox.yaml").read_text())
+    cfg["data"]["path"] = str(require_dataset("silverbox/SNLS80mV.csv"))
+    (tmp_path / "arrow.yaml").write_text(yaml.safe_dump(cfg))
+    lc = load_config(tmp_path / "arrow.yaml")
+    rec = load_record(lc)
+    split = make_split(lc, rec)
+    remove_means(rec, split)
+    arrow = slice(0, 40400)
+
+    def arrow_rmse(model):
+        prob = Problem.from_record(rec, model, split, lc.cfg.split.warmup)
+        yh = simulate_full(model, prob, initial_state(model, prob))
+        return float(np.sqrt(np.mean((prob.Y[arrow] - yh[arrow]) ** 2)))
+
+    assert arrow_rmse(ctx.diag.final.model) <= 0.0010
+    assert arrow_rmse(ctx.diag.nominal.model) > 0.010
+
+
+@pytest.mark.realdata
 def test_silverbox_mat_file_loads_like_csv(tmp_path):
     import numpy as np
     from pipeline.data import load_record
