@@ -207,7 +207,12 @@ def build_summary(lc, rec, prob, diag: Diagnosis, run_id: str, cfg_sha: str) -> 
         "models": models,
         "selected_model": name,
         "notes": {"rmse_sim": "free-run simulation error (not one-step prediction)",
-                  "cv_rmse_sim": "blocked k-fold CV is not computed yet (null)"},
+                  "cv_rmse_sim": "blocked k-fold CV is not computed yet (null)",
+                  # the Silverbox's two records give the same final structure's parameters 4 to 15 sigma apart
+                  "param_ci95": ("theta +- t_nu sigma: the noise's sampling uncertainty for this record's input, "
+                                 "given the model's structure; a model the diagnosis says misses something has "
+                                 "the parameters that best fit this input, and another excitation can move them "
+                                 "by several sigma")},
     }
 
 

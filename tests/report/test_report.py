@@ -71,6 +71,9 @@ def test_parameter_intervals_say_they_hold_for_this_input_when_the_structure_mis
     unc = html.split('id="uncertainty"')[1]
     nominal, final = unc.split("<h3>Final model</h3>")
     assert MISFIT_NOTE in nominal and MISFIT_NOTE not in final
+    # summary.json says it too, for tools that read param_ci95
+    notes = json.loads((demo_reports[0].parent / "summary.json").read_text())["notes"]
+    assert "this record's input" in notes["param_ci95"] and "several sigma" in notes["param_ci95"]
 
 
 def test_user_strings_are_escaped(tmp_path):
