@@ -91,3 +91,17 @@ def test_quadratic_damping_and_friction_that_hide_each_other_are_both_named(tmp_
     first = d["findings"][0]
     assert "gain_given" in first and first["gain_given"]["ci95"][0] > 0
     assert any(e["test"].startswith("pair_wald[") and e["p_value"] < 0.01 for e in first["evidence"])
+
+
+def test_a_delay_named_as_a_lag_says_the_validation_part_prefers_the_delay(tmp_path):
+    """A 5-sample input delay and a force offset (seed 2013, a fresh seed of the two-causes bench): the
+    estimation part ranks a first-order lag 3.7 criterion units (12.5 raw BIC units) ahead of the delay,
+    beyond a tie, so the lag is named; but the delay's validation error is 13 % lower. The finding must
+    say that the record's two parts disagree and name the delay (``disputed_by``), not present the lag
+    as established."""
+    d = _diagnosis(record(tmp_path, "delay+offset-2013", 2013, tau=0.1, d=0.2))
+    f = next(f for f in d["findings"] if f["family"] in ("unmodeled_dynamics", "input_delay"))
+    if f["family"] == "unmodeled_dynamics":
+        assert [t["family"] for t in f["disputed_by"]] == ["input_delay"]
+        assert f["disputed_by"][0]["ci95"][0] > 0
+        assert "The two parts of the record disagree: the validation part prefers input_delay" in f["description"]
