@@ -180,6 +180,12 @@ def first_screen(s: dict) -> dict:
         tied = ", ".join(str(t.get("hypothesis")) for t in f0.get("tied_with") or [])
         head = (f"{'Largest partial finding' if partial else 'Main cause'}: {cause}"
                 + (f", or {tied}: these data cannot tell them apart." if tied else "."))
+        disputed = f0.get("disputed_by") or []
+        if disputed:
+            # the estimation part chose it beyond a tie, the validation part clearly prefers another
+            head += (" The record's two parts disagree: the validation part prefers "
+                     + ", ".join(f"{t.get('hypothesis')} (validation error {sig(100 * t['relative'], 3)} % lower)"
+                                 for t in disputed) + ".")
         interval = (f"{sig(100 * ci[0], 3) if ci[0] is not None else '–'} to "
                     f"{sig(100 * ci[1], 3) if ci[1] is not None else '–'} %")
         if gg:

@@ -120,6 +120,18 @@ def test_first_screen_says_how_much_is_missed_the_cause_and_the_gain():
     assert fs["warnings"] == []
 
 
+def test_first_screen_says_when_the_validation_part_prefers_another_cause():
+    """``disputed_by`` (engine ``Diagnoser._disputed``): the estimation part chose the finding beyond a tie,
+    the validation part clearly prefers another; the first screen says the two parts disagree."""
+    s = _summary(62.39, 97.6)
+    s["diagnosis"]["findings"][0]["disputed_by"] = [{"family": "input_delay", "hypothesis": "input_delay",
+                                                     "criterion_gap": 3.7, "validation_rmse": 0.0078,
+                                                     "relative": 0.129, "ci95": [0.103, 0.154]}]
+    text = " ".join(view.first_screen(s)["lines"])
+    assert "two parts disagree: the validation part prefers input_delay (validation error 12.9 % lower)" in text
+    assert "disagree" not in " ".join(view.first_screen(_summary(62.39, 97.6))["lines"])
+
+
 def test_first_screen_states_each_outputs_fit_in_its_own_scale():
     """Two outputs (a temperature and a position, say): the pooled fit % and RMSE mix their units, and
     the gain is on each output's RMSE over its standard deviation, pooled. The first screen gives each
