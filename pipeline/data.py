@@ -101,6 +101,7 @@ class Split:
 
 
 MAX_MAGNITUDE = 1e75   # |values| above this overflow the 4th powers (kurtosis, HAC bandwidths)
+MIN_MAGNITUDE = 1e-75  # a column whose largest |value| is below this underflows them (1e-160: squares of 1e-320)
 
 
 def records_sha256(entries: list[tuple[str, str | None]]) -> str:
@@ -234,6 +235,10 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         if big > MAX_MAGNITUDE:
             raise DataError(f"column {name!r} holds values up to {big:.3g} in magnitude; the statistics raise "
                             f"residuals to the 4th power, which overflows a float beyond {MAX_MAGNITUDE:.0e}: "
+                            "rescale the column (e.g. other units)", file=f, key=key)
+        if 0.0 < big < MIN_MAGNITUDE:
+            raise DataError(f"column {name!r} holds values no larger than {big:.3g} in magnitude; the statistics "
+                            f"raise residuals to the 4th power, which underflows a float below {MIN_MAGNITUDE:.0e}: "
                             "rescale the column (e.g. other units)", file=f, key=key)
         return v
 

@@ -132,6 +132,11 @@ def _broken_record(kind):
         df.loc[12, "u"] = "n/a?"
     elif kind == "inf":
         df.loc[3, "u"] = np.inf
+    elif kind == "tiny_output":
+        df["x"] *= 1e-160
+    elif kind == "tiny_input_and_output":
+        df["u"] *= 1e-300
+        df["x"] *= 1e-300
     return df
 
 
@@ -145,6 +150,10 @@ RECORD_CASES = {
     "constant_output": "output 'x' is constant",     # used to end in an internal error (log of a zero residual)
     "missing_column": "column 'x' (output) not found",
     "non_numeric": "non-numeric value 'n/a?' at row 12",
+    # an independent probe (2026-12-07): squares of 1e-160 underflow to 0, which ended in internal errors
+    # (a NaN Jacobian, "SVD did not converge", log(0) in the BIC) or, for 1e-300, in a NaN fit % and findings
+    "tiny_output": "column 'x' holds values no larger than",
+    "tiny_input_and_output": "column 'u' holds values no larger than",
 }
 
 
