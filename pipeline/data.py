@@ -339,6 +339,7 @@ def make_split(lc: LoadedConfig, rec: "Record | int") -> Split:
                               file=f, key="split")
         est = [g for g in rec.segments if g.role == "estimation"]
         val = [g for g in rec.segments if g.role == "validation"]
+        _check_warmup(s.warmup, est[0].start, rec, f)
         return Split((est[0].start, est[-1].stop), (val[0].start, val[-1].stop))
     if s.estimation is not None:
         for key, rng in (("split.estimation", s.estimation), ("split.validation", s.validation)):
@@ -359,7 +360,26 @@ def make_split(lc: LoadedConfig, rec: "Record | int") -> Split:
         if nv < 10 or n - nv < 10:
             raise DataError(f"validation_fraction {s.validation_fraction} leaves fewer than 10 samples "
                             "on one side", file=f, key="split.validation_fraction")
+    _check_warmup(s.warmup, est[0], rec, f)
     return Split(est, val)
+
+
+def _check_warmup(warmup: int | None, e0: int, rec: "Record | int", f: str) -> None:
+    """``split.warmup`` must fit before the estimation part within its own experiment: the fit simulates
+    from ``warmup`` samples before it (``fit.Problem.from_record``), which cannot start before the
+    experiment does. A longer one was silently cut to what was there (an independent probe: warm-up 500
+    with the estimation part at sample 100 ran as warm-up 100, and 10**9 ran as none)."""
+    if not warmup:
+        return
+    starts = [g.start for g in getattr(rec, "segments", []) or [] if g.start <= e0]
+    room = e0 - max([0] + starts)
+    if warmup > room:
+        where = ("the start of the record" if not starts or max(starts) == 0 else
+                 f"the start of its experiment (sample {max(starts)})")
+        raise DataError(f"{warmup} samples of warm-up, but the estimation part starts {room} samples after "
+                        f"{where}; at most {room}"
+                        + ("" if room else " (there is nothing to simulate before it: remove split.warmup)"),
+                        file=f, key="split.warmup")
 
 
 def remove_means(rec: Record, split: Split) -> None:

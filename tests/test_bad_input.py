@@ -58,6 +58,12 @@ CONFIG_CASES = {
     "split_past_the_end": (("split", {"estimation": [0, 200], "validation": [200, 99999]}),
                            "split.validation: range [200, 99999) ends past the record's 400 samples"),
     "input_delay_longer_than_record": (("model.input_delay", 1e6), "model.input_delay: 1e+06 s is not shorter"),
+    # cut silently to what was there before (an independent probe, 2026-12-07)
+    "warmup_longer_than_the_room": (("split", {"estimation": [100, 300], "validation": [300, None], "warmup": 500}),
+                                    "split.warmup: 500 samples of warm-up, but the estimation part starts 100 "
+                                    "samples after the start of the record; at most 100"),
+    "warmup_with_estimation_at_the_start": (("split", {"validation_fraction": 0.3, "warmup": 10**9}),
+                                            "nothing to simulate before it: remove split.warmup"),
     "ml_uniform_bounds_reversed": (("estimators", [{"ml": {"density": "uniform", "low": 1.0, "high": 0.0}}]),
                                    "low (1) must be below high (0)"),
     "prefilter_unknown_param": (("prefilter", [{"name": "remove_mean", "params": {"foo": True}}]),
