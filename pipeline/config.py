@@ -132,7 +132,7 @@ class DataCfg(_ReadCfg):
     min_samples: Annotated[Integer, Field(ge=4)] = 50
     # bounds checked before a file is read: its size (and, for .mat/Parquet, its decoded size) and rows
     max_bytes: Annotated[Integer, Field(ge=1)] = 2 << 30
-    max_samples: Annotated[Integer, Field(ge=1)] = 50_000_000
+    max_samples: Annotated[Integer, Field(ge=1)] = 1_000_000   # = loaders.spec.DEFAULT_MAX_SAMPLES (why: there)
     # separate records: one validation record, or a list of experiments with roles (contract §4)
     validation: ExperimentCfg | None = None
     experiments: list[ExperimentCfg] | None = Field(default=None, min_length=1)
