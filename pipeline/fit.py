@@ -416,6 +416,7 @@ def at_bounds(fit: "FitResult") -> list[str]:
 
 
 STABLE_REL_STEP = 1e-4   # stable_jacobian's first relative step
+TINY_PARAM = 1e-6        # fit_output_error optimises a parameter whose start is below this in units of its start
 STABLE_WIDEN = 10.0       # a rough quotient's step is widened by this factor
 STABLE_TIMES = 3          # at most this many times (stable_jacobian: to 0.1 of the parameter's size)
 STABLE_TOL = 0.1          # until the column changes by less than this (relative norm)
@@ -504,6 +505,12 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     if bounded:      # a start outside the bounds (an equation-error estimate, a test's linearised value)
         th0 = np.clip(th0, lb, ub)
     penalty = np.full(yobs.size, 1e3)
+    # the optimiser works on θ/s: s = |θ₀| for a start below TINY_PARAM in magnitude (not 0), else 1.
+    # scipy's finite-difference step is √ε·max(1, |θ|), absolute below 1: a cubic coefficient of 3e-12
+    # (the demo's spring with x and u in micro-units) got a step 5 000 times its size, and its refit
+    # kept a quarter of the gain. With s = 1 everywhere nothing changes, bit for bit.
+    s = np.where((np.abs(th0) < TINY_PARAM) & (th0 != 0), np.abs(th0), 1.0)
+    scaled = bool(np.any(s != 1.0))
 
     def unpack(th):
         m = model.with_params(dict(zip(model.free, th[:nfree])))
@@ -559,6 +566,10 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
                 count(np.asarray(r, float))
         return rs
 
+    def resid_s(ph):
+        """``resid`` of θ = s·φ (the optimiser's variables; :data:`TINY_PARAM`)."""
+        return resid(ph * s)
+
     if len(th0):
         r0 = resid(th0)
         start_r[0] = None if r0 is penalty else r0
@@ -577,17 +588,25 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
                and steps >= JACOBIAN_THREADS_MIN_STEPS else {})
         if bounded:
             par["bounds"] = (lb, ub)
-        sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
-                            f_scale=f_scale, ftol=ftol, **par)
-        th, J, ok, msg, nfev = sol.x, sol.jac, bool(sol.success), str(sol.message), int(sol.nfev)
+        if scaled:
+            if bounded:
+                par["bounds"] = (lb / s, ub / s)
+            sol = least_squares(resid_s, th0 / s, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
+                                f_scale=f_scale, ftol=ftol, **par)
+            th, J = sol.x * s, sol.jac / s           # dr/dθ = (dr/dφ)/s
+        else:
+            sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
+                                f_scale=f_scale, ftol=ftol, **par)
+            th, J = sol.x, sol.jac
+        ok, msg, nfev = bool(sol.success), str(sol.message), int(sol.nfev)
         if switches(model):
             # scipy's step (√ε·|θ|) can straddle a jump of a sign(state) model's simulation: columns of
             # 1e4 times their size were seen (Coulomb friction + a 1.3 Hz force), standard errors 1e4 too small
-            J = stable_jacobian(resid, th, deferred, ub if bounded else None)
+            J = stable_jacobian(resid_s, th / s, deferred, ub / s if bounded else None) / s
         elif loss != "linear":
             # scipy's jac is loss-modified; the covariance needs the plain residual's Jacobian at θ̂
             from scipy.optimize._numdiff import approx_derivative
-            J = approx_derivative(resid, th, method="2-point")
+            J = approx_derivative(resid_s, th / s, method="2-point") / s
     else:
         th, J, ok, msg, nfev = th0, np.zeros((yobs.size, 0)), True, "nothing to fit", 0
     m, x0 = unpack(th)
