@@ -213,6 +213,8 @@ def first_screen(s: dict) -> dict:
                          + f"; with all of them the fit is {_fit_text(fin)}.")
         else:
             lines.append(f"With it the fit is {_fit_text(fin)}.")
+    elif diag.get("rounding_level"):
+        lines.append(f"Nothing to diagnose: {diag['rounding_level']}.")
     elif verdict == "no_significant_discrepancy":
         lines.append("No effect family explains the residual: the nominal model is adequate at the tested "
                      f"level α = {diag.get('alpha')}.")
