@@ -194,6 +194,9 @@ class DiagnoseCfg(_Strict):
             if missing:
                 raise ValueError(f"family {missing[0]!r} is in the contract but not implemented in this version; "
                                  f"implemented: {', '.join(implemented_families())}")
+            twice = next((f for i, f in enumerate(v) if f in v[:i]), None)
+            if twice is not None:   # it was tested twice and listed twice in families_tested
+                raise ValueError(f"family {twice!r} is listed twice")
         return v
 
 
@@ -385,6 +388,12 @@ _Loader.yaml_implicit_resolvers = {
 _BOOL12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
 for _first in "tTfF":
     _Loader.yaml_implicit_resolvers.setdefault(_first, []).insert(0, ("tag:yaml.org,2002:bool", _BOOL12))
+
+# YAML 1.2 floats with an exponent: PyYAML (YAML 1.1) reads 1e5, 4e0 and 1.5e5 as strings (its rule needs
+# a dot and a signed exponent), so `k: 1e5` was "expected a number, got str '1e5'"
+_EXP12 = re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)[eE][-+]?[0-9]+$")
+for _first in "-+.0123456789":
+    _Loader.yaml_implicit_resolvers.setdefault(_first, []).insert(0, ("tag:yaml.org,2002:float", _EXP12))
 
 
 def _bool12(loader, node):

@@ -48,6 +48,8 @@ CONFIG_CASES = {
     "time_and_sample_time": (("data.sample_time", 0.02), "data.time or data.sample_time, not both"),
     "bad_intersample": (("data.intersample", "cubic"), "data.intersample"),
     "unknown_family": (("diagnose", {"families": ["cubic_stiffnes"]}), "unknown family 'cubic_stiffnes'"),
+    "family_twice": (("diagnose", {"families": ["offset", "offset"]}), "family 'offset' is listed twice"),
+    "number_too_large": (("model.params.k", "1e400"), "model.params.k: expected a finite number"),
     "overlapping_split": (("split", {"estimation": [0, 300], "validation": [200, None]}), "overlap"),
     "state_named_like_function": (("model.states", ["sin", "v"]), "reserved"),
     "input_without_column": (("data.inputs", []), "model input 'u' has no data column"),
@@ -218,3 +220,15 @@ def test_model_that_diverges_is_bad_input(tmp_path, capsys):
     _record(n=2000).to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
     _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model: the model diverges")
+
+
+def test_numbers_with_an_exponent_are_numbers(tmp_path):
+    """PyYAML (YAML 1.1) reads 1e5, 4e0 and 1.5e5 as strings (its float needs a dot and a signed
+    exponent): `k: 4e0` was "expected a number, got str '4e0'". YAML 1.2 reads them as numbers."""
+    from pipeline.config import load_config
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    text = yaml.safe_dump(GOOD).replace("k: 4.0", "k: 4e0").replace("c: 0.6", "c: 6E-1").replace("m: 1.0", "m: .1e1")
+    assert "k: 4e0" in text and "c: 6E-1" in text and "m: .1e1" in text
+    (tmp_path / "c.yaml").write_text(text)
+    p = load_config(tmp_path / "c.yaml").cfg.model.params
+    assert (p["k"], p["c"], p["m"]) == (4.0, 0.6, 1.0)
