@@ -303,3 +303,13 @@ def test_default_row_bound_is_one_the_diagnosis_can_hold_in_memory(tmp_path):
     with pytest.raises(DataError) as e:
         _load(tmp_path, {"path": "d.csv", "sample_time": 0.1, "inputs": ["u"], "outputs": ["y"], "max_samples": 30})
     assert "more than data.max_samples = 30 rows" in str(e.value) and "decimate" in str(e.value)
+
+
+def test_a_file_with_another_delimiter_says_which_to_set(tmp_path):
+    """A semicolon file read with the default "," gave "column 'u' (input) not found; columns: 't;u;x'"
+    (an independent probe); the message now names the delimiter to set."""
+    (tmp_path / "d.csv").write_text("t;u;y\n" + "".join(f"{0.1 * i};{i % 3};{i % 5}\n" for i in range(60)))
+    with pytest.raises(DataError) as e:
+        _load(tmp_path, {"path": "d.csv", "time": "t", "inputs": ["u"], "outputs": ["y"]})
+    assert "set data.delimiter: ';'" in str(e.value)
+    _load(tmp_path, {"path": "d.csv", "time": "t", "inputs": ["u"], "outputs": ["y"], "delimiter": ";"})
