@@ -138,6 +138,7 @@ def _separate(best, others, y, yhats):
         c.fit = SimpleNamespace(Yhat=np.asarray(yh, float).reshape(-1, 1))
         c.gain = {"relative": 0.5}
     me = SimpleNamespace(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION,
+                         SEPARATE_CRITERION=Diagnoser.SEPARATE_CRITERION,
                          SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
     return Diagnoser.separate(me, best, [best] + others)
 
@@ -156,9 +157,15 @@ def test_a_near_equal_clearly_better_on_validation_is_the_finding():
     other = _acc("parameter_drift", "parameter_drift:k", -698.6, 1)
     got = _separate(best, [other], y, [truth + misfit, truth])
     assert got is other and "parameter_jump:k@18.1" in other.separation and "lower" in other.separation
-    # outside the tie the estimation part decides, however much better the other is on validation
-    best2, far = _acc("parameter_jump", "j", -700.0, 1), _acc("parameter_drift", "d", -697.9, 1)
-    assert _separate(best2, [far], y, [truth + misfit, truth]) is best2
+    assert "could not separate" in other.separation
+    # beyond a tie, up to "positive" evidence (6 units), the validation part still decides on a clear
+    # difference, and says by how much the estimation part preferred the other
+    best2, pos = _acc("parameter_jump", "j", -700.0, 1), _acc("parameter_drift", "d", -695.9, 1)
+    assert _separate(best2, [pos], y, [truth + misfit, truth]) is pos
+    assert "preferred by 4.1 criterion units, below 6" in pos.separation
+    # from "strong" evidence on (6 units) the estimation part decides, however much better the other is
+    best3, far = _acc("parameter_jump", "j", -700.0, 1), _acc("parameter_drift", "d", -693.9, 1)
+    assert _separate(best3, [far], y, [truth + misfit, truth]) is best3
 
 
 def test_a_near_equal_better_by_less_than_one_percent_does_not_replace_the_finding():

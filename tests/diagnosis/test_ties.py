@@ -18,7 +18,8 @@ def _setup():
     y = np.zeros((N, 1))
     e = rng.standard_normal((N, 1))
     prob = NS(Y=y, split=NS(val_slice=lambda: slice(0, N)))
-    dg = NS(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION, SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
+    dg = NS(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION, SEPARATE_CRITERION=Diagnoser.SEPARATE_CRITERION,
+            SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
 
     def cand(family, key, resid, criterion, accepted=True):
         fit = NS(Yhat=y - resid)
@@ -57,20 +58,20 @@ def test_a_significant_but_immaterial_difference_is_still_a_tie():
 
 def test_a_runner_up_the_validation_part_clearly_prefers_beyond_a_tie_is_stated():
     """``Diagnoser._disputed``: an accepted extension of another family that the estimation part ranks
-    behind the finding by more than a tie (``TIE_CRITERION``) but within ``RUNNER_UP_DBIC``, and whose
-    validation error is clearly lower (the rule of ``separate``), is stated; a tie (``separate``'s own
-    case), one too far behind, one not clearly better, a rejected one and the same family are not."""
+    behind the finding by ``SEPARATE_CRITERION`` or more but within ``RUNNER_UP_DBIC``, and whose
+    validation error is clearly lower (the rule of ``separate``), is stated; one closer (``separate``'s
+    own case), one too far behind, one not clearly better, a rejected one and the same family are not."""
     dg, rng, e, cand = _setup()
     dg.RUNNER_UP_DBIC = Diagnoser.RUNNER_UP_DBIC
     c = cand("unmodeled_dynamics", "lag", e, -50.0)
     others = [
-        cand("input_delay", "delay", 0.85 * e, -46.0),                                  # 4 behind, 15 % lower
-        cand("cubic_stiffness", "tie", 0.8 * e, -49.0),                                 # within a tie
+        cand("input_delay", "delay", 0.85 * e, -43.0),                                  # 7 behind, 15 % lower
+        cand("cubic_stiffness", "positive", 0.8 * e, -46.0),                            # separate's case
         cand("offset", "far", 0.8 * e, -50.0 + Diagnoser.RUNNER_UP_DBIC + 1.0),         # beyond the runners-up
-        cand("parameter_drift", "not-better", 0.998 * e, -46.0),                        # 0.2 % lower: not clear
-        cand("periodic_disturbance", "rejected", 0.8 * e, -46.0, accepted=False),
-        cand("unmodeled_dynamics", "same-family", 0.8 * e, -46.0),
+        cand("parameter_drift", "not-better", 0.998 * e, -43.0),                        # 0.2 % lower: not clear
+        cand("periodic_disturbance", "rejected", 0.8 * e, -43.0, accepted=False),
+        cand("unmodeled_dynamics", "same-family", 0.8 * e, -43.0),
     ]
     out = Diagnoser._disputed(dg, c, others)
     assert [t["hypothesis"] for t in out] == ["delay"]
-    assert out[0]["criterion_gap"] == 4.0 and out[0]["ci95"][0] > 0 and abs(out[0]["relative"] - 0.15) < 1e-9
+    assert out[0]["criterion_gap"] == 7.0 and out[0]["ci95"][0] > 0 and abs(out[0]["relative"] - 0.15) < 1e-9
