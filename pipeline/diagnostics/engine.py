@@ -1877,7 +1877,7 @@ class Diagnoser:
         """Accepted extensions of other families that the estimation part ranks behind ``c`` by
         ``SEPARATE_CRITERION`` or more (so :meth:`separate` does not weigh the validation part) but at most
         ``RUNNER_UP_DBIC``, and whose validation error is clearly lower than ``c``'s (the rule of
-        :meth:`separate`). The choice stands (the estimation part decides beyond a tie); the finding says
+        :meth:`separate`). The choice stands (the estimation part decides from "strong" evidence on); the finding says
         that the record's two parts disagree."""
         out = []
         if c.fit is None or c.gain is None:

@@ -182,7 +182,7 @@ def first_screen(s: dict) -> dict:
                 + (f", or {tied}: these data cannot tell them apart." if tied else "."))
         disputed = f0.get("disputed_by") or []
         if disputed:
-            # the estimation part chose it beyond a tie, the validation part clearly prefers another
+            # the estimation part chose it by strong evidence (6 units or more), the validation part prefers another
             head += (" The record's two parts disagree: the validation part prefers "
                      + ", ".join(f"{t.get('hypothesis')} (validation error {sig(100 * t['relative'], 3)} % lower)"
                                  for t in disputed) + ".")
