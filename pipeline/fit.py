@@ -508,9 +508,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     # the optimiser works on θ/s: s = |θ₀| for a start below TINY_PARAM in magnitude (not 0), else 1.
     # scipy's finite-difference step is √ε·max(1, |θ|), absolute below 1: a cubic coefficient of 3e-12
     # (the demo's spring with x and u in micro-units) got a step 5 000 times its size, and its refit
-    # kept a quarter of the gain. With s = 1 everywhere nothing changes, bit for bit.
+    # kept a quarter of the gain. With s = 1 (every other start) φ = θ exactly: nothing changes, bit for bit.
     s = np.where((np.abs(th0) < TINY_PARAM) & (th0 != 0), np.abs(th0), 1.0)
-    scaled = bool(np.any(s != 1.0))
 
     def unpack(th):
         m = model.with_params(dict(zip(model.free, th[:nfree])))
@@ -587,17 +586,10 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
         par = ({"workers": jacobian_map} if _LSQ_WORKERS and JACOBIAN_THREADS > 1 and len(th0) > 1
                and steps >= JACOBIAN_THREADS_MIN_STEPS else {})
         if bounded:
-            par["bounds"] = (lb, ub)
-        if scaled:
-            if bounded:
-                par["bounds"] = (lb / s, ub / s)
-            sol = least_squares(resid_s, th0 / s, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
-                                f_scale=f_scale, ftol=ftol, **par)
-            th, J = sol.x * s, sol.jac / s           # dr/dθ = (dr/dφ)/s
-        else:
-            sol = least_squares(resid, th0, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
-                                f_scale=f_scale, ftol=ftol, **par)
-            th, J = sol.x, sol.jac
+            par["bounds"] = (lb / s, ub / s)
+        sol = least_squares(resid_s, th0 / s, x_scale="jac", max_nfev=max_nfev, method="trf", loss=loss,
+                            f_scale=f_scale, ftol=ftol, **par)
+        th, J = sol.x * s, sol.jac / s           # dr/dθ = (dr/dφ)/s
         ok, msg, nfev = bool(sol.success), str(sol.message), int(sol.nfev)
         if switches(model):
             # scipy's step (√ε·|θ|) can straddle a jump of a sign(state) model's simulation: columns of

@@ -1859,19 +1859,27 @@ class Diagnoser:
         delay in a pendulum (held input, 10 % AR(0.5) noise, tuning seed 0) a first-order lag of 1.2
         samples and the delay were 0.01 criterion units apart, with validation errors 0.03237 and 0.03233."""
         out = []
-        if c.fit is None or c.gain is None:
-            return out
-        mine = gain_resid(c.fit, self.prob)
-        for o in sorted(others, key=lambda o: o.criterion):
-            if (not o.accepted or o.fit is None or o.gain is None or o.hyp.family == c.hyp.family
-                    or abs(o.criterion - c.criterion) >= self.TIE_CRITERION):
-                continue
-            theirs = gain_resid(o.fit, self.prob)
-            g = gain_ci(mine, theirs)        # 1 − RMSE_o / RMSE_c
+        for o, gap, g, mine, theirs in self._other_families(c, others, lambda gap: abs(gap) < self.TIE_CRITERION):
             if separates(g, self.SEPARATION_MIN_GAIN) or separates(gain_ci(theirs, mine), self.SEPARATION_MIN_GAIN):
                 continue
-            out.append(_tie_row(o, o.criterion - c.criterion, g))
+            out.append(_tie_row(o, gap, g))
         return out
+
+    def _other_families(self, c: Candidate, others: list[Candidate], within):
+        """The accepted, refitted extensions of other families than ``c``'s whose criterion gap to ``c``
+        (theirs − c's) satisfies ``within``, in criterion order, each with the gap, the relative gain
+        ``g`` = 1 − RMSE_o / RMSE_c on the validation part and both validation residuals (what
+        :meth:`_unresolved_ties` and :meth:`_disputed` judge)."""
+        if c.fit is None or c.gain is None:
+            return
+        mine = gain_resid(c.fit, self.prob)
+        for o in sorted(others, key=lambda o: o.criterion):
+            gap = o.criterion - c.criterion
+            if (not o.accepted or o.fit is None or o.gain is None or o.hyp.family == c.hyp.family
+                    or not within(gap)):
+                continue
+            theirs = gain_resid(o.fit, self.prob)
+            yield o, gap, gain_ci(mine, theirs), mine, theirs
 
     def _disputed(self, c: Candidate, others: list[Candidate]) -> list[dict]:
         """Accepted extensions of other families that the estimation part ranks behind ``c`` by
@@ -1879,19 +1887,9 @@ class Diagnoser:
         ``RUNNER_UP_DBIC``, and whose validation error is clearly lower than ``c``'s (the rule of
         :meth:`separate`). The choice stands (the estimation part decides from "strong" evidence on); the finding says
         that the record's two parts disagree."""
-        out = []
-        if c.fit is None or c.gain is None:
-            return out
-        mine = gain_resid(c.fit, self.prob)
-        for o in sorted(others, key=lambda o: o.criterion):
-            gap = o.criterion - c.criterion
-            if (not o.accepted or o.fit is None or o.gain is None or o.hyp.family == c.hyp.family
-                    or not self.SEPARATE_CRITERION <= gap <= self.RUNNER_UP_DBIC):
-                continue
-            g = gain_ci(mine, gain_resid(o.fit, self.prob))        # 1 − RMSE_o / RMSE_c
-            if separates(g, self.SEPARATION_MIN_GAIN):
-                out.append(_tie_row(o, gap, g))
-        return out
+        within = lambda gap: self.SEPARATE_CRITERION <= gap <= self.RUNNER_UP_DBIC  # noqa: E731
+        return [_tie_row(o, gap, g) for o, gap, g, _, _ in self._other_families(c, others, within)
+                if separates(g, self.SEPARATION_MIN_GAIN)]
 
     # refitted alternatives within this criterion of the finding's are listed with it, accepted or not (an
     # offset in the force equation whose gain interval reached below 0 beside an accepted sensor offset)

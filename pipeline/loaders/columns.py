@@ -18,10 +18,11 @@ def missing(name: str, available: list[str], role: str, f: str, key: str | None)
     near = [c for c in available if c.strip().lower() == name.strip().lower()]
     hint = f" (did you mean {near[0]!r}?)" if near else ""
     # one header cell holding the name between other separators: the file uses another delimiter
-    sep = next((s for s in (";", "\t", "|", ",", " ") for c in available[:1]
-                if s in c and name in [p.strip() for p in c.split(s)]), None)
-    if not near and sep is not None and len(available) == 1:
-        hint = f" (the header reads as one column {available[0]!r}: set data.delimiter: {sep!r})"
+    if not near and len(available) == 1:
+        cell = available[0]
+        sep = next((s for s in (";", "\t", "|", ",", " ") if name in [p.strip() for p in cell.split(s)]), None)
+        if sep is not None:
+            hint = f" (the header reads as one column {cell!r}: set data.delimiter: {sep!r})"
     avail = ", ".join(repr(c) for c in available[:12]) + (", ..." if len(available) > 12 else "")
     return DataError(f"column {name!r} ({role}) not found{hint}; columns: {avail or '(none)'}", file=f, key=key)
 

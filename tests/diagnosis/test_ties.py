@@ -20,6 +20,7 @@ def _setup():
     prob = NS(Y=y, split=NS(val_slice=lambda: slice(0, N)))
     dg = NS(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION, SEPARATE_CRITERION=Diagnoser.SEPARATE_CRITERION,
             SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
+    dg._other_families = lambda c, others, within: Diagnoser._other_families(dg, c, others, within)
 
     def cand(family, key, resid, criterion, accepted=True):
         fit = NS(Yhat=y - resid)
