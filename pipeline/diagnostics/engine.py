@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -338,6 +339,8 @@ class Diagnoser:
         self.w = prob.weights
         self._intersample_dropped: set[str] = set()
         self._probe_best: dict[int, tuple] = {}   # id(fit) -> (fit, probe hypothesis, its test): state_probe
+        self._basis_cache: dict[int, tuple] = {}   # id(fit) -> (fit, its Jacobian's column basis): _basis
+        self._basis_lock = threading.Lock()
         # (id(fit), id(hypothesis), id(its test)) -> (fit, hypothesis, test, refit, its reason): likelihood-
         # ratio screen refits that were not taken, for :meth:`estimate` (the objects are held so their ids
         # stay unique)
@@ -484,11 +487,18 @@ class Diagnoser:
 
     def _basis(self, fit: FitResult) -> np.ndarray:
         """:func:`stats.column_basis` of the fit's Jacobian, computed once per fit (every hypothesis'
-        test projects on it); call it before threads share it."""
-        cached = getattr(self, "_basis_cache", None)
-        if cached is None or cached[0] is not fit:
-            self._basis_cache = cached = (fit, None if fit.jac is None else stats.column_basis(fit.jac))
-        return cached[1]
+        test projects on it); call it before threads share it. Kept for the last few fits: the nominal
+        model's adequacy rows run in a side thread while the loop tests the current fit (:meth:`_run`),
+        and one slot would make the two recompute each other's basis in turn."""
+        with self._basis_lock:
+            hit = self._basis_cache.get(id(fit))
+        if hit is None or hit[0] is not fit:
+            hit = (fit, None if fit.jac is None else stats.column_basis(fit.jac))
+            with self._basis_lock:
+                while len(self._basis_cache) >= 4:
+                    self._basis_cache.pop(next(iter(self._basis_cache)))
+                self._basis_cache[id(fit)] = hit
+        return hit[1]
 
     ROUGH_TIMES = 2        # a rough simulation's test step is widened at most this many times (fit.stable_quotient)
 
@@ -1356,15 +1366,22 @@ class Diagnoser:
                 c.reason = "not significant after Holm correction"
         todo = self._screen(todo)
         # refits are independent: run them in threads (the kernel releases the GIL), and the
-        # intersample stage's refits beside them (it reads only the current fit)
+        # intersample stage's refits beside them (it reads only the current fit). A refit that adds a
+        # state is submitted first: it is the round's longest (Silverbox's second round: a lag node in
+        # the velocity equation 1.8 s, the other refits 0.25-0.45 s each), and started last it ran alone
+        # on one core for a second. Each result is the candidate's own, so the order changes no number.
         inter_job = None
         with ThreadPoolExecutor(max_workers=min(len(todo) + (not switched), os.cpu_count() or 1) or 1) as pool:
+            def submit(c: Candidate):
+                return pool.submit(lambda: c.fit or self.estimate(current, c))
+            jobs = {id(c): submit(c) for c in todo if c.hyp.extra_states}
             if not switched:
                 _log("  intersample: the current model with the other input interpolation and a finer step")
                 inter_job = pool.submit(self._intersample, current,
                                         np.random.default_rng([self.seed, 1000 + it]))
-            for c, f in zip(todo, pool.map(lambda c: c.fit or self.estimate(current, c), todo)):
-                c.fit = f
+            jobs.update({id(c): submit(c) for c in todo if id(c) not in jobs})
+            for c in todo:
+                c.fit = jobs[id(c)].result()
             extra = self._fallbacks(todo)
             for c, f in zip(extra, pool.map(lambda c: self.estimate(current, c), extra)):
                 c.fit = f
@@ -1512,6 +1529,13 @@ class Diagnoser:
         exact = self._rounding_level(nominal)
         if exact is not None:
             return self._exact_fit(nominal, exact, tests_of)
+        # the nominal model's adequacy rows (reported beside the final model's) depend on the nominal fit
+        # only: computed in a side thread from here on, they fill the cores where the loop runs one thread
+        # (the residual battery, the backward step, a round's last refit). shutdown(wait=False): the job
+        # runs to its end, the pool takes nothing more
+        side = ThreadPoolExecutor(max_workers=1)
+        nominal_job = side.submit(lambda: adequacy_tests(nominal, prob, self.alpha) + self.state_probe(nominal))
+        side.shutdown(wait=False)
         tests0, f_cyc0 = tests_of(nominal)
         findings, history = [], []
         links: list[Link] = []          # the forward pass: its fits, the form test's steps, the backward step
@@ -1578,12 +1602,12 @@ class Diagnoser:
             cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
             last_p = {c.hyp.family: c.p_family for c in cands}
             last_r2 = _family_r2(cands)
-        # the nominal model's adequacy (reported beside the final one) is independent of the final model's:
-        # computed in a second thread meanwhile
-        with ThreadPoolExecutor(max_workers=1) as side:
-            job = side.submit(lambda: adequacy_tests(nominal, prob, self.alpha) + self.state_probe(nominal))
-            adequacy = adequacy_tests(current, prob, self.alpha) + self.state_probe(current)
-            nominal_adequacy = job.result()
+        # the final model's adequacy: its state probe in a second thread beside the other rows
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            probe = pool.submit(self.state_probe, current)
+            adequacy = adequacy_tests(current, prob, self.alpha)
+            adequacy = adequacy + probe.result()
+        nominal_adequacy = nominal_job.result()
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
             # not accepted: a direction the model misses that no family's extension explains
