@@ -1597,16 +1597,18 @@ class Diagnoser:
         steps = [Accepted(l.cand.hyp.family, f.get("equation"), f.get("term"), l.cand.lr.p_value,
                           l.cand.lr.statistic, l.before.sse_w, l.after.sse_w)
                  for l, f in zip(links, findings) if l.cand is not None]
-        if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
-            tests_f, f_cyc_f = tests_of(current)
-            cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
-            last_p = {c.hyp.family: c.p_family for c in cands}
-            last_r2 = _family_r2(cands)
-        # the final model's adequacy: its state probe in a second thread beside the other rows
-        with ThreadPoolExecutor(max_workers=1) as pool:
+        # the final model's adequacy rows and its state probe in two threads, beside the last round of
+        # tests when the loop stopped at max_findings (all of them read the final fit only): that round's
+        # pool leaves a core idle between its stages
+        with ThreadPoolExecutor(max_workers=2) as pool:
             probe = pool.submit(self.state_probe, current)
-            adequacy = adequacy_tests(current, prob, self.alpha)
-            adequacy = adequacy + probe.result()
+            rows = pool.submit(adequacy_tests, current, prob, self.alpha)
+            if last_p is None and self.max_findings > 0:   # the loop stopped at max_findings: test once more
+                tests_f, f_cyc_f = tests_of(current)
+                cands, _ = self.candidates(current, f_cyc_f / self.dt, strongest_fisher(tests_f))
+                last_p = {c.hyp.family: c.p_family for c in cands}
+                last_r2 = _family_r2(cands)
+            adequacy = rows.result() + probe.result()
         nominal_adequacy = nominal_job.result()
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
