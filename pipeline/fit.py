@@ -41,7 +41,7 @@ from scipy.optimize import least_squares
 from .data import Record, Split
 from .errors import ConfigError, RefitAbandoned, SimulationError
 from .model import Model, rhs_vectorized, switches
-from .simulate import outputs, simulate_states
+from .simulate import outputs, simulate_states, undefined_equation
 
 RANK_RTOL = 1e-7
 # threads for the columns of a finite-difference Jacobian (scipy >= 1.16 takes a map as ``workers``),
@@ -242,6 +242,11 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
             res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
                                   bound=prob.bound, prefiltered=True)
             if res.diverged_at is not None:
+                bad = undefined_equation(model, prob.t[s0:s1], prob.inputs(model)[s0:s1],
+                                         segment_x0(model, prob, s0, x0), res)
+                if bad is not None:
+                    raise SimulationError(f"the fitted model fails on this record: the simulation produced NaN at "
+                                          f"sample {res.diverged_at}: {bad[1]} (parameters {model.params})", key=f"model.equations.{bad[0]}")
                 raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
                                       f"(parameters {model.params}); a parameter's physical range can be "
                                       "given in model.bounds (e.g. {a: [0, null]})")
@@ -580,6 +585,11 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             if why.diverged_at is None:
                 _declared_output_check(m0, prob.t[a:stop], prob.U[a:stop], why.X, prob.out_names)
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
+            bad = undefined_equation(m0, prob.t[a:stop], prob.inputs(m0)[a:stop], x00, why)
+            if bad is not None:     # name the equation: it is undefined where the simulation starts
+                raise SimulationError(f"the model diverges with its initial parameter values: the simulation "
+                                      f"produced NaN at sample {why.diverged_at}: {bad[1]} (model.params, model.initial)",
+                                      key=f"model.equations.{bad[0]}")
             raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
                                   "(model.params, model.initial)")
         steps = (stop - prob.fit_segment()[0]) * model.substeps

@@ -560,6 +560,45 @@ class SimResult:
         return f"the model diverged {when}; check the equations' signs and the initial state"
 
 
+def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray,
+                       res: SimResult) -> tuple[str, str] | None:
+    """(state, words) for a simulation that produced NaN: the first of the model's equations whose
+    right-hand side is not finite at the last state before the NaN (the state at the sample before it,
+    or ``x0``, with that sample's input), so the error can name the config key
+    ``model.equations.<state>`` instead of the whole model (an independent probe found "model" for
+    ``v: (u - c*v - k*x)/x`` at x(0) = 0). None for a divergence to large values, and when every
+    equation is finite there (the NaN arose inside an integration step: the model is named as before)."""
+    k = res.diverged_at
+    if k is None or not res.nonfinite:
+        return None
+    from .expressions import vectorize
+    from .model import _env
+    row = np.asarray(x0, float) if k == 0 else res.X[k - 1]
+    j = max(k - 1, 0)
+    U = np.atleast_2d(np.asarray(U, float).T).T
+    nx = len(model.nominal_states)
+    if not np.all(np.isfinite(row[:nx])):
+        return None
+    tj = np.asarray(t, float)[j:j + 1]
+    with np.errstate(all="ignore"):
+        try:
+            env = _env(model, row[None, :nx], U[j:j + 1], tj)
+            for s in model.nominal_states:     # the config's own equations (an extension's terms aside)
+                e = model.equations[s]
+                names = sorted(e.names)
+                v = float(np.broadcast_to(np.asarray(vectorize(e, names)(*[env[n] for n in names]), float), (1,))[0])
+                if not np.isfinite(v):
+                    break
+            else:
+                return None
+        except (ArithmeticError, ValueError, TypeError, KeyError):
+            return None
+    at = ", ".join([f"{n} = {x:.6g}" for n, x in zip(model.states[:nx], row[:nx])] +
+                   [f"{n} = {U[j, i]:.6g}" for i, n in enumerate(model.inputs) if i < U.shape[1]])
+    return s, (f"{s}' = {e.text} is {v} at t = {float(tj[0]):.6g} s ({at}); "
+               "check this equation and the parameter values")
+
+
 _PROGRAMS: dict = {}
 
 

@@ -222,6 +222,22 @@ def test_model_that_diverges_is_bad_input(tmp_path, capsys):
     _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model: the model diverges")
 
 
+@pytest.mark.parametrize("equation, value", [("(u - c*v - k*x)/x", "inf"), ("(u - c*v - k*x)/m + sqrt(x - 5)", "nan")])
+def test_an_equation_undefined_at_the_start_is_named(tmp_path, capsys, equation, value):
+    """An independent probe: an equation undefined where the simulation starts (1/0 at x(0) = 0, sqrt of
+    a negative number) was reported under the key ``model``. The key is the equation's, and the message
+    says what it evaluates to and at which state and input."""
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["model"]["equations"]["v"] = equation
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model.equations.v: the model diverges")
+    code = main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "runs" / "r2")])
+    err = capsys.readouterr().err.replace("-inf", "inf")
+    assert code == 2
+    assert f"v' = {equation} is {value} at t = 0 s (x = 0, v = 0, u = " in err, err
+
+
 def test_numbers_with_an_exponent_are_numbers(tmp_path):
     """PyYAML (YAML 1.1) reads 1e5, 4e0 and 1.5e5 as strings (its float needs a dot and a signed
     exponent): `k: 4e0` was "expected a number, got str '4e0'". YAML 1.2 reads them as numbers."""
