@@ -1586,7 +1586,7 @@ class Diagnoser:
                               self._accepted(best.fit), best, self._alternatives(best, cands)))
             current = links[-1].after
             last_p = None
-        old = [l.after for l in links]
+        old = list(links)
         links, moves = revisit(self, links)
         if moves:
             findings = self._revisited(links, old, findings, moves)
@@ -1781,14 +1781,21 @@ class Diagnoser:
                 and o.delta_bic_eff is not None and c.delta_bic_eff is not None and o.hyp.family != c.hyp.family
                 and o.criterion - c.criterion <= self.RUNNER_UP_DBIC]
 
-    def _revisited(self, links: list[Link], old: list[FitResult], findings: list[dict],
+    # a finding's keys that describe how its own forward round weighed it against the others
+    FORWARD_ROUND_KEYS = ("selection", "runners_up", "tied_with", "disputed_by")
+
+    def _revisited(self, links: list[Link], old: list[Link], findings: list[dict],
                    moves: list[dict]) -> list[dict]:
         """The findings of a chain the backward step changed (:mod:`.revisit`): a link it kept keeps its
         finding (matched by its fit); a moved or refitted one gets a new finding from its candidate, with
-        the move in ``revisit`` and its evidence."""
+        the move in ``revisit`` and its evidence. A refitted one (the same hypothesis, not swapped in)
+        keeps what its forward round said about the alternatives (``FORWARD_ROUND_KEYS`` and the
+        sentences on ties and disputes), marked as the forward round's: the refit does not weigh them
+        again (on the delay + offset record of seed 2007 the offset's runner-up was lost when the zoh
+        switch before it was dropped)."""
         out = []
         for link in links:
-            k = next((j for j, f in enumerate(old) if f is link.after), None)
+            k = next((j for j, l in enumerate(old) if l.after is link.after), None)
             if k is not None:
                 out.append(findings[k])
             elif link.cand is None:         # a switch the backward step put in (revisit.to_switch)
@@ -1814,9 +1821,30 @@ class Diagnoser:
                                                       "p_value": None, "detail": move["detail"]}]
                 else:
                     f["revisit"] = ("refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")")
+                    f["description"] += self._forward_round(f, next(
+                        (findings[j] for j, l in enumerate(old) if l.cand is not None and l.cand.hyp is link.cand.hyp),
+                        None))
                 f["description"] += f" Backward step: {f['revisit']}."
                 out.append(f)
         return out
+
+    # the sentences of a finding's description on ties and disputes start with these (:meth:`finding`)
+    CONTEST_SENTENCES = (" These data cannot tell it from", " The two parts of the record disagree")
+
+    def _forward_round(self, f: dict, before: dict | None) -> str:
+        """Copies into the refitted finding ``f`` what its forward-round finding ``before`` said about the
+        other causes (``FORWARD_ROUND_KEYS``, where ``f`` has none of its own), and returns the forward
+        round's sentences on ties and disputes, introduced as such ("" when there are none)."""
+        if before is None:
+            return ""
+        carried = [key for key in self.FORWARD_ROUND_KEYS if before.get(key) and not f.get(key)]
+        for key in carried:
+            f[key] = before[key]
+        if carried:
+            f["forward_round"] = carried
+        desc = before.get("description", "")
+        at = [desc.find(m) for m in self.CONTEST_SENTENCES if m in desc]
+        return f" In its forward round:{desc[min(at):]}" if at else ""
 
     TIE_CRITERION = 2.0   # criterion units within which the estimation part cannot separate two causes
     SEPARATION_MIN_GAIN = 0.01   # and the validation error by which the other must then be lower

@@ -85,6 +85,12 @@ def test_a_half_sample_switch_is_dropped_once_the_delay_is_found(tmp_path, seed,
     assert abs(delay["delay_s"] - 0.1) <= 0.1 * DT
     drop = next(m for m in d["revisit"] if m["move"] == "drop")
     assert drop["finding"] == "intersample:zoh"
+    if "d" in effects:
+        # the force offset, refitted on foh after the drop, keeps what its forward round weighed it against
+        # (a sensor offset, not accepted): the refit does not weigh the alternatives again
+        off = next(f for f in d["findings"] if f["family"] == "offset")
+        assert off["forward_round"] == ["runners_up"]
+        assert [r["family"] for r in off["runners_up"]] == ["output_offset"]
 
 
 def _held_record(folder: Path, seed: int, k3: float, n: int = 4000, d: float = 0.0) -> Path:
