@@ -78,7 +78,18 @@ def test_a_half_sample_switch_is_dropped_once_the_delay_is_found(tmp_path, seed,
     """The forward pass named a switch to zoh first on both records (a held input lags the foh one by
     half a sample, ``Intersample.equivalent``), then the delay. Given the delay, zoh no longer beats the
     configured foh, so the switch is dropped and the delay finding is refitted on foh."""
-    d = _diagnosis(record(tmp_path, f"delay-{seed}-{len(effects)}", seed, **effects))
+    cfg = record(tmp_path, f"delay-{seed}-{len(effects)}", seed, **effects)
+    if "d" in effects:          # with the report: the carried runners-up are shown as the forward round's
+        import html
+        import json
+
+        from pipeline.cli import main
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            assert main(["report", str(cfg), "--out", str(tmp_path / "run")]) == 0
+        d = json.loads((tmp_path / "run" / "summary.json").read_text())["diagnosis"]
+        page = html.unescape((tmp_path / "run" / "report.html").read_text(encoding="utf-8"))
+    else:
+        d = _diagnosis(cfg)
     fams = [f["family"] for f in d["findings"]]
     assert "intersample" not in fams and "input_delay" in fams
     delay = next(f for f in d["findings"] if f["family"] == "input_delay")
@@ -91,6 +102,8 @@ def test_a_half_sample_switch_is_dropped_once_the_delay_is_found(tmp_path, seed,
         off = next(f for f in d["findings"] if f["family"] == "offset")
         assert off["forward_round"] == ["runners_up"]
         assert [r["family"] for r in off["runners_up"]] == ["output_offset"]
+        assert "as weighed in its forward round, before the backward step refitted it:" in page
+        assert off["runners_up"][0]["separation"] in page
 
 
 def _held_record(folder: Path, seed: int, k3: float, n: int = 4000, d: float = 0.0) -> Path:
