@@ -76,6 +76,10 @@ CONFIG_CASES = {
                                   "prefilter[0]: omega0: expected a positive number, got True"),
     # a comment character cuts each line at its first occurrence: a digit cut the numbers apart
     "comment_digit": (("data.comment", "0"), "data.comment: '0' can be part of a number"),
+    # the estimation record again as validation record: every validation number in-sample (a probe, 2026-12-07)
+    "validation_is_the_estimation_record": (("data.validation", {"path": "rec.csv"}),
+                                            "error: {cfg}: data.validation: the validation record rec.csv holds "
+                                            "the same samples as the estimation record rec.csv (data)"),
     # a leading "." made a hidden run folder that readers skip and a later run's cleanup could take
     "hidden_name": (("name", ".a.tmp-999999"), "name: expected letters, digits"),
     # a degree of 10**6 hung; unknown keys of poly were accepted
@@ -236,6 +240,30 @@ def test_an_equation_undefined_at_the_start_is_named(tmp_path, capsys, equation,
     err = capsys.readouterr().err.replace("-inf", "inf")
     assert code == 2
     assert f"v' = {equation} is {value} at t = 0 s (x = 0, v = 0, u = " in err, err
+
+
+def test_a_copy_of_the_estimation_record_is_no_validation_record(tmp_path, capsys):
+    """The same samples under another file name (a copy) are refused as the same file is: the check is on
+    the samples read, so the validation numbers cannot be in-sample by renaming. A different record runs,
+    and so does one file holding both records in different columns (tests/test_loaders.py)."""
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["data"]["experiments"] = [{"path": "rec.csv", "role": "estimation"}, {"path": "other.csv", "role": "estimation"},
+                                  {"path": "copy.csv", "role": "validation"}]
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "copy.csv").write_bytes((tmp_path / "rec.csv").read_bytes())
+    other = _record()
+    other["x"] = other["x"] + 1.0
+    other.to_csv(tmp_path / "other.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, "data.experiments[2]: the validation record copy.csv holds the same samples "
+                                    "as the estimation record rec.csv (data.experiments[0])")
+    from pipeline.config import load_config
+    from pipeline.data import load_record
+    cfg["data"]["experiments"][2]["path"] = "other.csv"
+    cfg["data"]["experiments"][1]["path"] = "copy.csv"
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    rec = load_record(load_config(tmp_path / "c.yaml"))
+    assert [g.role for g in rec.segments] == ["estimation", "estimation", "validation"]
 
 
 def test_numbers_with_an_exponent_are_numbers(tmp_path):
