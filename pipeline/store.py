@@ -183,6 +183,31 @@ def _known_keys(runs: list[RunInfo], key: str) -> bool:
     return any(r.get(key) is not None for r in runs)
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_ordered(key: str, sym: str, value: str, values: list) -> None:
+    """``> < >= <=`` compare numbers with a number, or text with text that is not a number (an ISO date
+    with ``created``). Anything else is bad input: an independent probe found ``verdict>3`` and
+    ``diagnosis>3`` (a mapping, compared as its text) matching every run, with exit 0."""
+    for v in values:
+        if v is None or isinstance(v, (int, float)) and not isinstance(v, bool):
+            continue
+        what = (f"a {type(v).__name__} ({'a mapping' if isinstance(v, dict) else 'a list'})"
+                if isinstance(v, (dict, list)) else f"text ({v!r})" if isinstance(v, str) else type(v).__name__)
+        if isinstance(v, str) and not _is_number(value):
+            continue
+        raise InputError(f"{key!r} is {what}, and {sym} compares a number with a number or text with text that "
+                         f"is not a number (got {value!r}); use = or != for {key!r}"
+                         + (", or a dotted path to one of its numbers (e.g. metrics.final.validation.rmse_sim)"
+                            if isinstance(v, dict) else ""), key="--where")
+
+
 def filter_runs(runs: list[RunInfo], wheres: list[str]) -> list[RunInfo]:
     """Runs matching every ``KEY=VALUE`` (numbers compare as numbers; ``!= >= <= > <`` too). A key that
     no run has is bad input (a typo would otherwise silently match nothing)."""
@@ -193,6 +218,8 @@ def filter_runs(runs: list[RunInfo], wheres: list[str]) -> list[RunInfo]:
             raise InputError(f"no run has {key!r}; columns: {', '.join(COLUMNS)}, or a dotted path into "
                              "summary.json (e.g. diagnosis.verdict), config.*, manifest.*, metrics.*",
                              key="--where")
+        if sym not in ("=", "!="):
+            _check_ordered(key, sym, value, [r.get(key) for r in out])
         kept = []
         for r in out:
             v = r.get(key)

@@ -96,6 +96,24 @@ def test_runs_and_compare_cli(batch_runs, capsys):
     assert err.startswith("error:") and err.count("\n") == 1
 
 
+def test_ordering_where_on_text_or_a_mapping_is_bad_input(batch_runs, capsys):
+    """An independent probe: ``verdict>3`` and ``diagnosis>3`` (a mapping, compared as its text) listed
+    every run with exit 0. > and < compare numbers with numbers, or text with text that is not a number
+    (an ISO date with ``created``); anything else is exit 2 naming --where."""
+    root = str(batch_runs["root"])
+    for w, what in (("verdict>3", "'verdict' is text"), ("diagnosis>3", "'diagnosis' is a dict (a mapping)"),
+                    ("metrics.final<=0", "'metrics.final' is a dict")):
+        assert main(["runs", "--root", root, "--where", w]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: --where: ") and what in err and err.count("\n") == 1, err
+    assert main(["runs", "--root", root, "--where", "created>2000-01-01", "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 3
+    assert main(["runs", "--root", root, "--where", "created>2999-01-01", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == []
+    assert main(["runs", "--root", root, "--where", "metrics.final.validation.fit_percent>-1e9", "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 3
+
+
 def test_metrics_and_params_follow_dvc_conventions(batch_runs):
     """DVC reads metrics as a tree of mappings with numeric leaves (lists and nulls are not metrics);
     params.yaml is what the stage consumed (the config)."""
