@@ -81,6 +81,7 @@ def check_tracking(uri: str | None, key: str) -> str:
     """Before a run that will be tracked: the URI is usable (:func:`check_uri`) and MLflow installed."""
     uri = check_uri(uri, key)
     _import_mlflow()
+    check_reachable(uri, key)       # before the analysis, not after it
     return uri
 
 
@@ -93,6 +94,32 @@ def resolve_uri(uri: str | None) -> str:
         except OSError as exc:
             raise InputError(f"{uri}: cannot create the folder of the database: {exc.strerror}", key="--uri") from None
     return uri
+
+
+REACH_TIMEOUT_S = 5.0    # seconds to open a TCP connection to an http(s) tracking server
+
+
+def check_reachable(uri: str, key: str = "--uri") -> None:
+    """An http(s) tracking server must accept a TCP connection within ``REACH_TIMEOUT_S``: MLflow's client
+    retries a refused connection with exponential backoff (7 retries, about 4 minutes, meant for a
+    rate-limiting server), so an unreachable address took 247 s to fail (an independent probe). A server
+    that answers keeps MLflow's retries."""
+    import socket
+    from urllib.parse import urlsplit
+    parts = urlsplit(uri)
+    if parts.scheme not in ("http", "https"):
+        return
+    try:
+        host, port = parts.hostname, parts.port or (443 if parts.scheme == "https" else 80)
+    except ValueError as exc:
+        raise InputError(f"{uri}: {exc}", key=key) from None
+    if not host:
+        raise InputError(f"{uri}: expected a host, as in http://HOST:PORT", key=key)
+    try:
+        socket.create_connection((host, port), timeout=REACH_TIMEOUT_S).close()
+    except OSError as exc:
+        raise InputError(f"cannot reach the tracking server {host}:{port} ({exc.strerror or type(exc).__name__}); "
+                         "is it running? (mlflow server --port PORT)", key=key) from None
 
 
 def _artifact_location(uri: str) -> str | None:
@@ -143,6 +170,7 @@ def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str
     uri = resolve_uri(tracking_uri)
     if not experiment or not experiment.strip():
         raise InputError("expected a non-empty experiment name", key="--experiment")
+    check_reachable(uri)
     try:
         return _log(MlflowClient(tracking_uri=uri), folder, summary, manifest, config, uri, experiment)
     except InputError:
@@ -192,6 +220,7 @@ def search(tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> Any
     _import_mlflow()
     import mlflow
     uri = resolve_uri(tracking_uri)
+    check_reachable(uri)
     old = os.environ.get("MLFLOW_TRACKING_URI")
     mlflow.set_tracking_uri(uri)
     try:

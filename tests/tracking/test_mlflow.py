@@ -39,3 +39,27 @@ def test_mlflow_round_trip_on_sqlite(batch_runs, tmp_path, capsys):
     assert "MLflow run" in capsys.readouterr().out
     df = mlflow.search_runs(experiment_names=["sysid"], filter_string="params.name = 'demo_b'")
     assert len(df) == 1 and df.iloc[0]["params.diagnose.alpha"] == "0.05"
+
+
+def test_an_unreachable_tracking_server_fails_at_once(batch_runs, tmp_path, capsys):
+    """MLflow's client retries a refused connection for about 4 minutes (its backoff is meant for a server
+    that rate-limits): an independent probe waited 247 s for exit 2. A server that does not accept a TCP
+    connection is exit 2 within the connect timeout, for ``track`` and before the analysis of ``report
+    --track``; nothing is written."""
+    import socket
+    import time
+    with socket.socket() as s:           # a port with nobody listening: bind, then close
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    uri = f"http://127.0.0.1:{port}"
+    run = next(r for r in batch_runs["results"] if r.ok)
+    t0 = time.monotonic()
+    assert main(["track", run.path, "--uri", uri]) == 2
+    err = capsys.readouterr().err
+    assert time.monotonic() - t0 < 30
+    assert err.startswith(f"error: --uri: cannot reach the tracking server 127.0.0.1:{port}") and err.count("\n") == 1
+    cfg = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
+    out = tmp_path / "r"
+    assert main(["report", str(cfg), "--out", str(out), "--track", uri]) == 2
+    assert "error: --track: cannot reach the tracking server" in capsys.readouterr().err
+    assert not out.exists()
