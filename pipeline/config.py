@@ -629,6 +629,12 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
                 _validate_options(name, opts or {})
             except ValidationError as exc:
                 raise ConfigError(_validation_message(exc, f"estimators[{i}].{name}"), file=f) from None
+    if "estimators" in cfg.model_fields_set and cfg.structures is None:
+        # estimators fit the candidate structures: without them the section did nothing (a probe found it
+        # accepted with exit 0, while an unknown key anywhere else is an error)
+        raise ConfigError("the estimators fit the candidate structures of a structures section, which this "
+                          "config does not have: add a structures section (README: The config) or remove "
+                          "estimators", file=f, key="estimators")
     if cfg.structures is not None:
         st = cfg.structures
         if st.equation not in m.states:

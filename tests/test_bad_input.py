@@ -80,6 +80,9 @@ CONFIG_CASES = {
     "validation_is_the_estimation_record": (("data.validation", {"path": "rec.csv"}),
                                             "error: {cfg}: data.validation: the validation record rec.csv holds "
                                             "the same samples as the estimation record rec.csv (data)"),
+    # ignored with exit 0 (a probe, 2026-12-07): estimators fit the structures section's candidates
+    "estimators_without_structures": (("estimators", ["ls", "iv"]),
+                                      "estimators: the estimators fit the candidate structures of a structures section"),
     # a leading "." made a hidden run folder that readers skip and a later run's cleanup could take
     "hidden_name": (("name", ".a.tmp-999999"), "name: expected letters, digits"),
     # a degree of 10**6 hung; unknown keys of poly were accepted
