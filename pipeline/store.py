@@ -306,8 +306,13 @@ def resolve(ref: str, root: Path = DEFAULT_ROOT) -> RunInfo:
     if len(pref) == 1:
         return pref[0]
     if pref:
-        raise InputError(f"{ref!r} matches {len(pref)} runs ({', '.join(r.run_id for r in pref[:5])}); "
-                         "give more of the run id", key="RUN")
+        # several folders can hold the same run id (the same config and data run twice into two folders):
+        # then no longer prefix tells them apart, and the folder is what to give
+        same = len({r.run_id for r in pref}) == 1
+        listed = ", ".join(f"{r.run_id} in {r.path}" if same else r.run_id for r in pref[:5])
+        raise InputError(f"{ref!r} matches {len(pref)} runs ({listed}); "
+                         + ("give the run folder's path" if same else "give more of the run id or the run folder's path"),
+                         key="RUN")
     raise InputError(f"no run {ref!r} under {root} (give a run folder or a run id from `sysid runs`)", key="RUN")
 
 

@@ -114,6 +114,23 @@ def test_ordering_where_on_text_or_a_mapping_is_bad_input(batch_runs, capsys):
     assert len(json.loads(capsys.readouterr().out)) == 3
 
 
+def test_one_run_id_in_two_folders_asks_for_the_folder(batch_runs, tmp_path, capsys):
+    """The same config and data run into two folders share a run id, so no longer prefix tells them apart
+    (an independent probe got "give more of the run id" where there was none to give): the message lists
+    the folders and asks for one; the folder's path then resolves."""
+    import shutil
+    root = tmp_path / "runs"
+    shutil.copytree(batch_runs["root"], root)
+    a = next(p for p in root.iterdir() if p.name.startswith("demo-"))
+    shutil.copytree(a, root / "copy_of_demo")
+    rid = json.loads((a / "summary.json").read_text())["run_id"]
+    assert main(["compare", rid, "demo_c", "--root", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert f"matches 2 runs ({rid} in " in err and str(root / "copy_of_demo") in err, err
+    assert err.rstrip().endswith("give the run folder's path") and err.count("\n") == 1
+    assert main(["compare", str(root / "copy_of_demo"), "demo_c", "--root", str(root)]) == 0
+
+
 def test_metrics_and_params_follow_dvc_conventions(batch_runs):
     """DVC reads metrics as a tree of mappings with numeric leaves (lists and nulls are not metrics);
     params.yaml is what the stage consumed (the config)."""
