@@ -269,7 +269,16 @@ def _check_lengths(target: Path, shown: str) -> None:
                    "are possible; choose a shorter path")
 
 
+# folders whose contents belong to a version-control tool: a run folder written there becomes part of its
+# internals (an independent probe wrote one into .git/ of a checkout)
+VCS_FOLDERS = (".git", ".hg", ".svn")
+
+
 def _check_location(target: Path, shown: str) -> None:
+    vcs = next((part for part in target.parts[:-1] if part in VCS_FOLDERS), None)
+    if vcs is not None or target.name in VCS_FOLDERS:
+        raise _err(shown, f"is inside a {vcs or target.name} folder, which belongs to version control; "
+                   "expected a folder outside it (e.g. reports/NAME)")
     for pre in PSEUDO_PREFIXES:
         if _is_within(target, pre):
             raise _err(shown, f"is under {pre}, not a normal writable filesystem; expected a folder on disk")

@@ -346,3 +346,15 @@ def test_a_ctrl_c_lost_in_a_callback_still_publishes_nothing(tmp_path, capsys, m
     assert code == 1 and "interrupted; no run folder written" in capsys.readouterr().err
     assert not out.exists() and not any(tmp_path.iterdir())
     assert not rf.INTERRUPTED.is_set()             # cleared for the next command in this process
+
+
+@pytest.mark.parametrize("inside", [".git/sysid", ".git/hooks/r", ".hg/r", ".git"])
+def test_a_target_inside_version_control_internals_is_refused(tmp_path, inside):
+    """An independent probe wrote a run folder into a checkout's .git/ (accepted as any new folder): it
+    would become part of git's internals. The checkout itself may hold run folders (reports/NAME)."""
+    (tmp_path / ".git" / "hooks").mkdir(parents=True)
+    (tmp_path / ".hg").mkdir()
+    with pytest.raises(InputError, match="belongs to version control"):
+        rf.check_target(tmp_path / inside, inputs=[], default=False)
+    assert sorted(p.name for p in (tmp_path / ".git").iterdir()) == ["hooks"]
+    assert rf.check_target(tmp_path / "reports_r", inputs=[], default=False) == (tmp_path / "reports_r").resolve()
