@@ -127,6 +127,7 @@ def run_batch(configs: list[str], *, jobs: int = 2, executor: str = "local", sch
         raise InputError("no config given", key="CONFIG")
     configs = [os.path.abspath(c) for c in _unique(configs)]
     root = str(runfolder.check_new_path(root, key="--root", folder=True))
+    made = [p for p in [Path(root), *Path(root).parents] if not os.path.lexists(p)]   # created below
     try:
         Path(root).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -140,6 +141,12 @@ def run_batch(configs: list[str], *, jobs: int = 2, executor: str = "local", sch
             name = Path(res.config).name
             progress.emit(f"[batch] {'ok' if res.ok else 'FAILED'} {name}"
                           + (f" -> {res.path} ({res.seconds:.1f} s)" if res.ok else f": {res.error}"))
+    if made and not any(r.ok for r in results.values()):
+        # every config failed: the folders this call created hold nothing (rmdir removes only an empty
+        # folder, so nothing another process put there meanwhile is touched)
+        with contextlib.suppress(OSError):
+            for p in made:
+                os.rmdir(p)
     return [results[i] for i in range(len(configs))]
 
 

@@ -34,6 +34,18 @@ def test_batch_cli_prints_the_runs_table_and_the_error(batch_runs, capsys, tmp_p
     assert err.count("error:") == 1 and "nosuch" in err and "Traceback" not in err
 
 
+def test_a_batch_where_every_config_fails_leaves_no_folder_it_made(batch_runs, capsys, tmp_path):
+    """Nothing half-written: when no run succeeds, the --root folder this batch created is removed (it is
+    empty, and so are the parents it created); a --root that existed before is left as it was."""
+    cfgs = batch_runs["configs"]
+    assert main(["batch", str(cfgs["broken"]), "--jobs", "1", "--root", str(tmp_path / "new" / "root")]) == 2
+    assert "0 of 1 configs ran" in capsys.readouterr().out
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "mine").mkdir()
+    assert main(["batch", str(cfgs["broken"]), "--jobs", "1", "--root", str(tmp_path / "mine")]) == 2
+    assert (tmp_path / "mine").is_dir()
+
+
 def test_bad_batch_options_are_input_errors(capsys):
     assert main(["batch", "x.yaml", "--jobs", "0"]) == 2
     assert main(["batch", "x.yaml", "--scheduler", "tcp://127.0.0.1:1"]) == 2
