@@ -77,10 +77,12 @@ def cmd_compare(a: argparse.Namespace) -> int:
 
 
 def cmd_track(a: argparse.Namespace) -> int:
-    from .tracking.mlflow_backend import log_run, resolve_uri
+    from .tracking.mlflow_backend import log_run, read_run, resolve_uri
     uri = resolve_uri(a.uri)
-    for ref in a.runs:
-        r = store.resolve(ref, Path(a.root))
+    runs = [store.resolve(ref, Path(a.root)) for ref in a.runs]
+    for r in runs:              # every folder readable before any is logged: nothing half-logged
+        read_run(Path(r.path))
+    for r in runs:
         rid = log_run(r.path, uri, a.experiment)
         print(f"{r.run_id}: MLflow run {rid} in {uri}")
     return 0

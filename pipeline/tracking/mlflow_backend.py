@@ -157,16 +157,26 @@ def _chunks(items: list, n: int):
         yield items[i:i + n]
 
 
-def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> str:
-    """Log one run folder; returns the MLflow run id."""
-    MlflowClient = _import_mlflow()
-    folder = Path(folder)
+def read_run(folder: Path) -> tuple[dict, dict, dict]:
+    """(summary, manifest, resolved config) of a run folder; InputError naming the folder when one is
+    missing or unreadable (``track`` reads every folder before it logs any)."""
     try:
         summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
         manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
         config = yaml.safe_load((folder / "config.resolved.yaml").read_text(encoding="utf-8")) or {}
     except (OSError, ValueError, yaml.YAMLError) as exc:
         raise InputError(f"not a complete run folder ({exc})", file=str(folder)) from None
+    if not all(isinstance(x, dict) for x in (summary, manifest, config)):
+        raise InputError("not a complete run folder (summary.json, manifest.json and config.resolved.yaml "
+                         "must each hold a mapping)", file=str(folder))
+    return summary, manifest, config
+
+
+def log_run(folder: str | Path, tracking_uri: str | None = None, experiment: str = EXPERIMENT) -> str:
+    """Log one run folder; returns the MLflow run id."""
+    MlflowClient = _import_mlflow()
+    folder = Path(folder)
+    summary, manifest, config = read_run(folder)
     uri = resolve_uri(tracking_uri)
     if not experiment or not experiment.strip():
         raise InputError("expected a non-empty experiment name", key="--experiment")

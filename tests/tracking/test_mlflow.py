@@ -63,3 +63,22 @@ def test_an_unreachable_tracking_server_fails_at_once(batch_runs, tmp_path, caps
     assert main(["report", str(cfg), "--out", str(out), "--track", uri]) == 2
     assert "error: --track: cannot reach the tracking server" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_track_logs_nothing_when_one_folder_is_broken(batch_runs, tmp_path, capsys):
+    """``track A B`` with B a hand-broken run folder logged A and then failed (an independent probe):
+    every folder is read before any is logged, so the store is left as it was."""
+    import shutil
+    good = next(r for r in batch_runs["results"] if r.ok)
+    broken = tmp_path / "broken"
+    shutil.copytree(good.path, broken)
+    text = (broken / "summary.json").read_text()
+    (broken / "summary.json").write_text(text[: len(text) // 2])
+    db = tmp_path / "db" / "ml.db"
+    assert main(["track", good.path, str(broken), "--uri", f"sqlite:///{db}"]) == 2
+    err = capsys.readouterr().err
+    assert str(broken) in err and err.count("\n") == 1
+    if db.exists():
+        mlflow.set_tracking_uri(f"sqlite:///{db}")
+        exp = mlflow.get_experiment_by_name("sysid")
+        assert exp is None or len(mlflow.search_runs(experiment_ids=[exp.experiment_id])) == 0
