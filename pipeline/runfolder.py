@@ -183,13 +183,17 @@ def is_replaceable_run(folder: Path) -> bool:
     return True
 
 
-def iter_run_folders(root: Path) -> Iterator[Path]:
+def iter_run_folders(root: Path, skipped: list[Path] | None = None) -> Iterator[Path]:
     """Every complete run folder at or below ``root``, in sorted order. Hidden entries (temp and
     moved-aside folders of this tool among them) are never entered, symlinks never followed, and a
-    run folder's own subfolders are not searched."""
+    run folder's own subfolders are not searched. ``skipped`` collects the folders that carry this
+    tool's marker but are no longer complete (a file edited, added or removed by hand)."""
     root = Path(root)
     if is_complete_run(root):
         yield root
+        return
+    if skipped is not None and os.path.isfile(root / MARKER):
+        skipped.append(root)
         return
     try:
         entries = sorted(os.scandir(root), key=lambda e: e.name)
@@ -198,7 +202,7 @@ def iter_run_folders(root: Path) -> Iterator[Path]:
     for e in entries:
         if e.name.startswith(".") or not e.is_dir(follow_symlinks=False):
             continue
-        yield from iter_run_folders(Path(e.path))
+        yield from iter_run_folders(Path(e.path), skipped)
 
 
 # ---------------------------------------------------------------- checking a target

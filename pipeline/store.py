@@ -29,13 +29,13 @@ COLUMNS: dict[str, str] = {"name": "name", "run_id": "run id", "data": "data", "
                            "bic": "BIC", "created": "created"}
 
 
-def iter_run_folders(root: Path):
+def iter_run_folders(root: Path, skipped: list[Path] | None = None):
     """Complete run folders under ``root``, in name order: the run-folder module's rule (a complete
-    marker; hidden temp and moved-aside folders never listed)."""
+    marker; hidden temp and moved-aside folders never listed); ``skipped`` collects the edited ones."""
     from .runfolder import iter_run_folders as _complete
     if not Path(root).is_dir():
         return
-    yield from _complete(Path(root))
+    yield from _complete(Path(root), skipped)
 
 
 @dataclass
@@ -140,13 +140,19 @@ def _lookup(tree: Any, dotted: str) -> Any:
 
 
 def list_runs(root: Path = DEFAULT_ROOT) -> list[RunInfo]:
-    """Every complete run under ``root``; an unreadable folder is skipped with a warning on stderr."""
-    out = []
-    for p in iter_run_folders(Path(root)):
+    """Every complete run under ``root``; an unreadable folder, and one whose files were changed after
+    the run wrote them (it carries the run marker but is no longer complete), is skipped with a warning
+    on stderr (an independent probe found the second skipped silently)."""
+    out: list[RunInfo] = []
+    edited: list[Path] = []
+    for p in iter_run_folders(Path(root), edited):
         try:
             out.append(RunInfo.load(p))
         except InputError as exc:
             print(f"warning: skipped {exc}", file=sys.stderr)
+    for p in edited:
+        print(f"warning: skipped {p}: its files changed after the run wrote them (a file edited, added or "
+              "removed), so it is no longer this tool's run folder", file=sys.stderr)
     return out
 
 

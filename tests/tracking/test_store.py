@@ -131,6 +131,21 @@ def test_one_run_id_in_two_folders_asks_for_the_folder(batch_runs, tmp_path, cap
     assert main(["compare", str(root / "copy_of_demo"), "demo_c", "--root", str(root)]) == 0
 
 
+def test_runs_says_which_edited_run_folders_it_skips(batch_runs, tmp_path, capsys):
+    """A run folder whose files were changed by hand is no longer listed (its marker does not match);
+    an independent probe found it skipped silently. ``runs`` names it on stderr and lists the others."""
+    import shutil
+    root = tmp_path / "runs"
+    shutil.copytree(batch_runs["root"], root)
+    edited = next(p for p in root.iterdir() if p.name.startswith("demo_b"))
+    with open(edited / "params.yaml", "a") as fh:
+        fh.write("# my note\n")
+    assert main(["runs", "--root", str(root), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert sorted(r["name"] for r in json.loads(out)) == ["demo", "demo_c"]
+    assert err.count("\n") == 1 and err.startswith(f"warning: skipped {edited}: its files changed after the run")
+
+
 def test_metrics_and_params_follow_dvc_conventions(batch_runs):
     """DVC reads metrics as a tree of mappings with numeric leaves (lists and nulls are not metrics);
     params.yaml is what the stage consumed (the config)."""
