@@ -270,22 +270,28 @@ def _load_source(src: Source, dc, plain: bool) -> _Part:
         dt = float(src.sample_time)
         t = np.arange(n) * dt
     if plain:
-        _check_excited(ins, slice(None), f, key, outs=outs)
+        _check_excited(ins, slice(None), f, key, outs=outs,
+                       columns={v: str(k) for k, v in {**src.input_map, **src.output_map}.items()})
     return _Part(np.asarray(t, float), dt, ins, outs, file_sha256(src.path), log)
 
 
 def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | None, where: str = "",
-                   outs: dict[str, np.ndarray] | None = None) -> None:
+                   outs: dict[str, np.ndarray] | None = None, columns: dict[str, str] | None = None) -> None:
     """A constant input excites nothing; a constant output has nothing to identify (a model that holds it
-    fits with a residual of exactly zero, whose log-likelihood is not finite)."""
+    fits with a residual of exactly zero, whose log-likelihood is not finite). ``columns``: the file's
+    column of each model name, named in the message when it differs."""
+    def named(kind: str, name: str) -> str:
+        col = (columns or {}).get(name, name)
+        return f"column {col!r} ({kind} {name!r})" if col != name else f"{kind} {name!r}"
+
     for name, u in ins.items():
         if np.ptp(u[rows]) == 0:
-            raise DataError(f"input {name!r} is constant{where} ({float(u[rows][0]):.10g}); a constant input excites "
-                            "nothing", file=f, key=key)
+            raise DataError(f"{named('input', name)} is constant{where} ({float(u[rows][0]):.10g}); a constant input "
+                            "excites nothing", file=f, key=key)
     for name, y in (outs or {}).items():
         if np.ptp(y[rows]) == 0:
-            raise DataError(f"output {name!r} is constant{where} ({float(y[rows][0]):.10g}); a constant output "
-                            "holds nothing to identify", file=f, key=key)
+            raise DataError(f"{named('output', name)} is constant{where} ({float(y[rows][0]):.10g}); a constant "
+                            "output holds nothing to identify", file=f, key=key)
 
 
 def _same_samples(a: "_Part", b: "_Part") -> bool:

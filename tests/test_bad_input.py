@@ -269,6 +269,18 @@ def test_a_copy_of_the_estimation_record_is_no_validation_record(tmp_path, capsy
     assert [g.role for g in rec.segments] == ["estimation", "estimation", "validation"]
 
 
+def test_a_constant_column_is_named_by_its_column(tmp_path, capsys):
+    """With data.outputs mapping a column to a model name, the message named only the model name
+    (an independent probe: "output 'x2' is constant" for the file's column 'y2')."""
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["data"]["outputs"] = {"pos": "x"}
+    df = _record().rename(columns={"x": "pos"})
+    df["pos"] = 0.25
+    df.to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, "column 'pos' (output 'x') is constant (0.25)")
+
+
 def test_numbers_with_an_exponent_are_numbers(tmp_path):
     """PyYAML (YAML 1.1) reads 1e5, 4e0 and 1.5e5 as strings (its float needs a dot and a signed
     exponent): `k: 4e0` was "expected a number, got str '4e0'". YAML 1.2 reads them as numbers."""
