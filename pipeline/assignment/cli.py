@@ -28,7 +28,7 @@ def _make(args: argparse.Namespace) -> int:
 
 
 def _grade(args: argparse.Namespace) -> int:
-    from .grade import HEADER, check_writable, grade, gradebook_csv
+    from .grade import HEADER, check_writable, grade, gradebook_csv, write_tracked
     from .summary import FIRST_LINE, render_summary
     from ..runfolder import check_new_path
     if args.jobs < 1:
@@ -45,10 +45,12 @@ def _grade(args: argparse.Namespace) -> int:
     check_writable(out, HEADER, "--out")
     check_writable(page, FIRST_LINE, "--html")
     key, rows = grade(args.key, args.submissions, jobs=args.jobs, executor=args.executor, runs_dir=runs)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(gradebook_csv(rows), encoding="utf-8")
-    page.parent.mkdir(parents=True, exist_ok=True)
-    page.write_text(render_summary(key.assignment, rows, page, runs), encoding="utf-8")
+    book, html = gradebook_csv(rows), render_summary(key.assignment, rows, page, runs)
+    # again: grading takes minutes, and the instructor may have opened and saved a file meanwhile
+    check_writable(out, HEADER, "--out")
+    check_writable(page, FIRST_LINE, "--html")
+    write_tracked(out, book)
+    write_tracked(page, html)
     known = {r["student_id"] for r in rows}
     extra = sorted(p.name for p in Path(args.submissions).iterdir() if p.is_dir() and p.name not in known)
     if extra:

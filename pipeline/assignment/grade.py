@@ -21,6 +21,10 @@ Nothing a student claims is trusted. For each student of the key (sorted by id):
    ``hypot(a_sin, a_cos)`` of the projection on sin and cos at the key's frequency; for an output offset
    the mean change of the measured output). This makes the comparison independent of how the student
    wrote the term (sign, name, a division by a fixed mass). ``parameter_rel_error = |c - c_key| / |c_key|``.
+   It is left blank (no parameter credit, the reason says why) when the parameter is one of the
+   starter model's (its linear damping, fitted to absorb a friction, projects on ``sign(v)`` with about
+   the key's size), or when ``g`` explains less than :data:`FORM_SHARE_MIN` of ``Δ``: the parameter
+   does not multiply a term of the cause's form.
    For an input delay the size is the config's ``model.input_delay`` (seconds; 0 when absent): the
    gradebook shows the relative error, and the rubric scores the error in samples,
    ``|d - d_key| / dt``, against ``rubric.delay_tolerance_samples`` (1.5 samples, the diagnosis
@@ -40,6 +44,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import io
 import json
 import math
@@ -58,8 +63,10 @@ from ..errors import InputError, SimulationError
 from ..expressions import parse, vectorize
 from ..fit import Problem, equation_error_start, fit_output_error, initial_state, simulate_full
 from ..model import Model, rhs_vectorized
+from ..runfolder import MARKER, is_replaceable_run, read_marker
 from ..simulate import outputs, simulate_states
 from . import KEY_SCHEMA, rubric
+from .roster import id_problem
 from .submission import Submission, load_submission
 from .template import Template, validation_message
 
@@ -112,6 +119,10 @@ def load_key(path: str | Path) -> tuple[KeyFile, Path]:
         key = KeyFile.model_validate(raw)
     except ValidationError as exc:
         raise InputError(validation_message(exc), file=f) from None
+    for i, s in enumerate(key.students):   # ids name folders: the roster's rule, or grading leaves them
+        problem = id_problem(s.id)
+        if problem:
+            raise InputError(problem, file=f, key=f"students.{i}.id")
     ids = [s.id for s in key.students]
     if len(set(ids)) != len(ids) or not ids:
         raise InputError("student ids must be unique and at least one", file=f, key="students")
@@ -160,35 +171,61 @@ def _on_record(lc: LoadedConfig, path: Path) -> LoadedConfig:
     return LoadedConfig(cfg, lc.path, lc.equations, lc.output_exprs, lc.input_map, lc.output_map)
 
 
-def cause_size(model: Model, param: str, st: KeyStudent, t: np.ndarray, U: np.ndarray, X: np.ndarray,
-               out_name: str | None) -> float:
-    """The size of the key's cause in the student's fitted model (module docstring, step 5)."""
+# the least share of the named parameter's change that the key's term must explain for the parameter
+# to count as sizing the cause (module docstring, step 5); a term of the key's form, however written
+# (sign, scaling, a division by a fixed mass), explains all of it
+FORM_SHARE_MIN = 0.9
+
+
+def cause_projection(model: Model, param: str, st: KeyStudent, t: np.ndarray, U: np.ndarray, X: np.ndarray,
+                     out_name: str | None) -> tuple[float, float]:
+    """The size of the key's cause in the student's fitted model (module docstring, step 5) and the
+    share of the named parameter's change that the key's term explains (``1 - |Δ - g c|² / |Δ|²``;
+    NaN when the parameter changes nothing). The share is what tells a parameter of the cause's term
+    from one whose change merely correlates with it: a linear damping ``c`` fitted to absorb a Coulomb
+    friction has a non-zero projection on ``sign(v)`` but is not a friction coefficient."""
     if param not in model.params:
-        return math.nan
+        return math.nan, math.nan
     m0 = model.with_params({param: 0.0})
     fam, p = st.family, st.parameters
     if fam == "output_offset":
         if out_name is None:
-            return math.nan
+            return math.nan, math.nan
         d = outputs(model, t, U, X, [out_name])[:, 0] - outputs(m0, t, U, X, [out_name])[:, 0]
-        return float(np.mean(d))
-    eq = st.acts_on
-    if eq not in model.states:
-        return math.nan
-    j = model.states.index(eq)
-    d = rhs_vectorized(model, X, U, t)[:, j] - rhs_vectorized(m0, X, U, t)[:, j]
-    if fam == "periodic_disturbance":
-        w = 2 * np.pi * float(p["frequency_hz"]) * t
-        G = np.column_stack([np.sin(w), np.cos(w)])
-        a = np.linalg.lstsq(G, d, rcond=None)[0]
-        return float(np.hypot(*a))
-    if fam == "offset":
-        g = np.ones_like(t)
+        G = np.ones((len(d), 1))
     else:
-        names = list(model.states)
-        g = np.broadcast_to(np.asarray(vectorize(parse(p["term"], set(names)), names)(*X.T), float), t.shape)
-    gg = float(g @ g)
-    return float(g @ d) / gg if gg > 0 else math.nan
+        eq = st.acts_on
+        if eq not in model.states:
+            return math.nan, math.nan
+        j = model.states.index(eq)
+        d = rhs_vectorized(model, X, U, t)[:, j] - rhs_vectorized(m0, X, U, t)[:, j]
+        if fam == "periodic_disturbance":
+            w = 2 * np.pi * float(p["frequency_hz"]) * t
+            G = np.column_stack([np.sin(w), np.cos(w)])
+        elif fam == "offset":
+            G = np.ones((len(d), 1))
+        else:
+            names = list(model.states)
+            g = np.broadcast_to(np.asarray(vectorize(parse(p["term"], set(names)), names)(*X.T), float), t.shape)
+            G = np.asarray(g, float).reshape(-1, 1)
+    if not np.all(np.isfinite(d)) or not np.any(G):
+        return math.nan, math.nan
+    if G.shape[1] == 1:   # the closed form (as before the share was computed: same bytes in the gradebook)
+        g = G[:, 0]
+        a = np.array([float(g @ d) / float(g @ g)])
+    else:
+        a = np.linalg.lstsq(G, d, rcond=None)[0]
+    dd = float(d @ d)
+    share = 1.0 - float(np.sum(np.square(d - G @ a))) / dd if dd > 0 else math.nan
+    if fam == "periodic_disturbance":
+        return float(np.hypot(*a)), share
+    return float(a[0]), share
+
+
+def cause_size(model: Model, param: str, st: KeyStudent, t: np.ndarray, U: np.ndarray, X: np.ndarray,
+               out_name: str | None) -> float:
+    """The size of the key's cause in the student's fitted model (module docstring, step 5)."""
+    return cause_projection(model, param, st, t, U, X, out_name)[0]
 
 
 def _empty_row(st: KeyStudent, status: str, reason: str) -> dict:
@@ -266,11 +303,24 @@ def _grade_submission(task: Task, sub: Submission, summary: dict, run_id: str) -
             notes.append(f"input delay {size:.4g} s is {score_error:.1f} samples from the key's "
                          f"(tolerance {tolerance:g})")
     else:
+        param = sub.answer.parameter
         sim = simulate_states(model, prob.t[:n], prob.U[:n], x0, bound=prob.bound)
         if sim.diverged_at is None:
-            size = cause_size(model, sub.answer.parameter, st, prob.t[:n], prob.U[:n], sim.X, out_name)
+            size, share = cause_projection(model, param, st, prob.t[:n], prob.U[:n], sim.X, out_name)
         else:
+            size, share = math.nan, math.nan
+        # a parameter sizes the cause only when it multiplies a term of the cause's form that the
+        # student added: the starter's own parameters (c, k, ...) absorb part of any effect and would
+        # otherwise earn parameter credit for an unchanged starter model
+        if cause_ok and param in m_nom.params:
             size = math.nan
+            notes.append(f"parameter {param!r} is a parameter of the starter model, not of a term the "
+                         "submission added for the cause: no parameter credit")
+        elif cause_ok and math.isfinite(share) and share < FORM_SHARE_MIN:
+            size = math.nan
+            notes.append(f"parameter {param!r} does not multiply a term of the cause's form (the key's term "
+                         f"explains {100 * max(share, 0.0):.0f}% of its change, at least "
+                         f"{100 * FORM_SHARE_MIN:.0f}% expected): no parameter credit")
     if st.family == "periodic_disturbance":
         ref = abs(ref)
     perr = abs(size - ref) / abs(ref) if math.isfinite(size) and ref != 0 else math.nan
@@ -302,7 +352,8 @@ def _run(task: Task, sub: Submission, root: Path) -> dict:
     res = batch.run_one(str(sub.config.path), str(root), html=task.runs_dir is not None, name=st.id)
     if not res.ok:
         status = "invalid" if res.kind == "input" else "failed"
-        return _empty_row(st, status, _relative(res.error or "", task.submissions, task.key_dir))
+        bases = [task.submissions, task.key_dir] + ([task.runs_dir.parent] if task.runs_dir is not None else [])
+        return _empty_row(st, status, _relative(res.error or "", *bases))
     summary = json.loads((Path(res.path) / "summary.json").read_text(encoding="utf-8"))
     return _grade_submission(task, sub, summary, res.run_id or "")
 
@@ -328,8 +379,32 @@ def grade_one(task: Task) -> dict:
                                                   task.submissions, task.key_dir))
 
 
+WRITTEN_SUFFIX = ".sysid-grade"   # the record of what sysid grade wrote: .<file name>.sysid-grade beside it
+
+
+def written_record(path: Path) -> Path:
+    """The hidden file beside ``path`` recording the sha256 of what this tool last wrote there."""
+    return path.parent / f".{path.name}{WRITTEN_SUFFIX}"
+
+
+def _read_record(rec: Path) -> dict | None:
+    try:
+        data = json.loads(rec.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(data, dict) and data.get("tool") == "sysid grade" and isinstance(data.get("sha256"), str)
+    return data if ok else None
+
+
 def check_writable(path: Path, first_line: str | None, what: str) -> None:
-    """Refuse to overwrite a file this tool did not write (recognised by its first line)."""
+    """Refuse to overwrite a file unless it is byte for byte what this tool last wrote there.
+
+    The first line tells a foreign file at once; an edit further down (a bonus typed into a row of the
+    gradebook) is caught by the sha256 recorded in :func:`written_record` when the file was written,
+    so the instructor's change is never lost silently. A file with the first line but no record (an
+    older release, or the record deleted) is refused too: whether it was edited cannot be known. A
+    foreign file at the record's own name is refused, as it would be overwritten."""
+    rec = written_record(path)
     if path.exists():
         ok = path.is_file() and first_line is not None
         if ok:
@@ -337,16 +412,88 @@ def check_writable(path: Path, first_line: str | None, what: str) -> None:
                 ok = fh.readline().rstrip("\n") == first_line
         if not ok:
             raise InputError(f"exists and was not written by sysid grade; choose another {what}", file=str(path))
+        data = _read_record(rec)
+        if data is None:
+            raise InputError(f"exists, but there is no record ({rec.name} beside it) of what sysid grade wrote, "
+                             f"so it may hold your edits; move it away or choose another {what}", file=str(path))
+        if file_sha256(path) != data["sha256"]:
+            raise InputError(f"was edited after sysid grade wrote it (its sha256 differs from the one in "
+                             f"{rec.name}); move it away or choose another {what}; nothing was changed",
+                             file=str(path))
+    elif os.path.lexists(rec) and _read_record(rec) is None:
+        raise InputError(f"exists and was not written by sysid grade (it would be overwritten with the record "
+                         f"of {path.name}); move it away or choose another {what}", file=str(rec))
+
+
+def write_tracked(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` (through a temporary file and a rename, so a reader never sees half
+    of it) and then its record (:func:`written_record`), which the next :func:`check_writable` needs
+    to overwrite it. Interrupted between the two, the next run refuses the file: the safe side."""
+    data = text.encode("utf-8")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for target, payload in ((path, data), (written_record(path), (json.dumps(
+            {"tool": "sysid grade", "file": path.name, "sha256": hashlib.sha256(data).hexdigest()},
+            sort_keys=True) + "\n").encode())):
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(payload)
+            os.chmod(tmp, 0o666 & ~_umask())
+            os.replace(tmp, target)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _folder_problem(d: Path) -> str:
+    """What makes the existing ``d`` not a replaceable run folder, in words (for the message only;
+    the decision is :func:`pipeline.runfolder.is_replaceable_run`'s)."""
+    if d.is_symlink() or not d.is_dir():
+        return "is not a folder" if not d.is_symlink() else "is a symlink"
+    marker = read_marker(d)
+    if marker is None:
+        return f"is not a run folder of this tool (no valid {MARKER} marker)"
+    listed = marker["files"]
+    added, edited = [], []
+    for dirpath, _, filenames in os.walk(d):
+        for fn in filenames:
+            rel = str((Path(dirpath) / fn).relative_to(d))
+            if rel == MARKER:
+                continue
+            entry = listed.get(rel)
+            if entry is None:
+                added.append(rel)
+            elif isinstance(entry, dict) and entry.get("sha256") != file_sha256(Path(dirpath) / fn):
+                edited.append(rel)
+    missing = [r for r in listed if not (d / r).is_file()]
+    parts = [f"{w}: {', '.join(sorted(v)[:5])}" for w, v in (("added", added), ("edited", edited),
+                                                              ("missing", missing)) if v]
+    return "holds files this tool did not write" + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def check_runs_dir(runs: Path, ids: list[str]) -> None:
-    """Run folders are replaced only when they are run folders (they hold a manifest.json)."""
+    """Before any grading: each ``runs/<id>`` is absent, empty, or a run folder exactly as this tool
+    wrote it (:func:`pipeline.runfolder.is_replaceable_run`, the test the run writer applies). Found
+    only by the run writer, an edited folder became the student's ``invalid`` row with score 0 and
+    overwrote the earlier grade; the instructor's change is the instructor's error: exit 2."""
     if runs.exists() and not runs.is_dir():
         raise InputError("exists and is not a folder", file=str(runs), key="--runs")
     for sid in ids:
         d = runs / sid
-        if d.exists() and not (d.is_dir() and (d / "manifest.json").is_file()):
-            raise InputError("exists and is not a run folder; choose another --runs folder", file=str(d))
+        if not os.path.lexists(d):
+            continue
+        if d.is_dir() and not d.is_symlink() and not any(os.scandir(d)):
+            continue
+        if not is_replaceable_run(d):
+            raise InputError(f"{_folder_problem(d)}; move it away or choose another --runs folder; nothing was "
+                             "graded", file=str(d))
 
 
 def gradebook_csv(rows: list[dict]) -> str:

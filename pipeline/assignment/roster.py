@@ -20,6 +20,19 @@ class Student:
     email: str | None = None
 
 
+def id_problem(sid: str) -> str | None:
+    """What is wrong with ``sid`` as a student id, or None. One rule for the roster and the key:
+    an id names the student's folders (``students/<id>``, ``submissions/<id>``, ``runs/<id>``), so
+    ``..``, ``/`` and the like would make grading read and write outside those folders."""
+    if not sid:
+        return "empty id"
+    if not ID_PATTERN.match(sid):
+        return f"id {sid!r} may only use letters, digits, '_', '.', '-' (at most 40)"
+    if sid in (".", ".."):
+        return f"id {sid!r} is not a usable folder name"
+    return None
+
+
 def load_roster(path: str | Path) -> list[Student]:
     """Read and check the roster. Raises InputError naming the file, the row and the column."""
     path = Path(path)
@@ -51,13 +64,9 @@ def load_roster(path: str | Path) -> list[Student]:
     for line, r in enumerate(rows[1:], start=2):
         cell = (lambda i: r[i].strip() if i is not None and i < len(r) else "")
         sid, name = cell(i_id), cell(i_name)
-        if not sid:
-            raise InputError("empty id", file=f, key=f"row {line}: id")
-        if not ID_PATTERN.match(sid):
-            raise InputError(f"id {sid!r} may only use letters, digits, '_', '.', '-' (at most 40)", file=f,
-                             key=f"row {line}: id")
-        if sid in (".", ".."):
-            raise InputError(f"id {sid!r} is not a usable folder name", file=f, key=f"row {line}: id")
+        problem = id_problem(sid)
+        if problem:
+            raise InputError(problem, file=f, key=f"row {line}: id")
         if sid.lower() in seen:  # folders of ids differing only in case collide on some file systems
             raise InputError(f"id {sid!r} appears twice (also on row {seen[sid.lower()]}; ids are compared "
                              "ignoring case)", file=f, key=f"row {line}: id")

@@ -11,6 +11,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+import yaml
 
 from pipeline.assignment.grade import HEADER, Task, grade_one, load_key
 from pipeline.cli import main
@@ -129,6 +130,10 @@ def test_missing_or_broken_submissions_give_a_row(klass, tmp_path, break_it, sta
     (lambda k, d: k.write_text(json.dumps({"schema": "x"})), "not an assignment key"),
     (lambda k, d: (d / "instructor" / "s01" / "record.csv").write_text("t,u,x\n"), "differs from the one"),
     (lambda k, d: k.write_text(k.read_text().replace('"rubric"', '"rubrik"', 1)), "rubrik: unknown key"),
+    # an id naming another folder would read a submission outside --submissions and write a run outside runs/
+    (lambda k, d: k.write_text(json.dumps(dict(json.loads(k.read_text()), students=[
+        dict(s, id="../x") if i == 1 else s for i, s in enumerate(json.loads(k.read_text())["students"])]))),
+     "key.json: students.1.id: id '../x' may only use letters"),
 ])
 def test_instructors_bad_key_exits_2(klass, submissions, tmp_path, capsys, edit, needle):
     d = tmp_path / "class"
@@ -138,7 +143,8 @@ def test_instructors_bad_key_exits_2(klass, submissions, tmp_path, capsys, edit,
     rc = main(["grade", "--key", str(k), "--submissions", str(submissions[0]), "--out", str(tmp_path / "g.csv")])
     err = capsys.readouterr().err
     assert rc == 2 and err.startswith("error: ") and err.count("\n") == 1 and needle in err, err
-    assert not (tmp_path / "g.csv").exists()
+    assert not (tmp_path / "g.csv").exists() and not (tmp_path / "runs").exists()
+    assert not (tmp_path / "x").exists()
 
 
 def test_foreign_gradebook_is_not_overwritten(klass, submissions, tmp_path, capsys):
@@ -172,3 +178,113 @@ def test_unknown_executor_exits_2(klass, submissions, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and err.startswith("error: ") and "--executor" in err and "slurm" in err
     assert not (tmp_path / "g.csv").exists()
+
+
+def _regrade(klass, submissions, d: Path) -> int:
+    return main(["grade", "--key", str(klass[0] / "key.json"), "--submissions", str(submissions[0]),
+                 "--out", str(d / "gradebook.csv")])
+
+
+def _snapshot(d: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("name, line", [("gradebook.csv", 2), ("summary.html", 3)])
+def test_hand_edited_gradebook_or_summary_is_not_overwritten(klass, submissions, graded, tmp_path, capsys,
+                                                             name, line):
+    """A manual bonus typed into a row (below the first line, which alone used to be checked) is the
+    instructor's: grade refuses before grading and leaves every file as it was; the same folder
+    without the edit is graded again as before."""
+    d = tmp_path / "grades"
+    shutil.copytree(graded[1], d)
+    f = d / name
+    original = f.read_bytes()
+    lines = original.decode().split("\n")
+    lines[line - 1] += ",manual: +5 bonus" if name.endswith(".csv") else "<!-- my note -->"
+    f.write_text("\n".join(lines))
+    before = _snapshot(d)
+    rc = _regrade(klass, submissions, d)
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith(f"error: {f}: ") and "edited after sysid grade wrote it" in err, err
+    assert err.count("\n") == 1 and _snapshot(d) == before
+    f.write_bytes(original)
+    assert _regrade(klass, submissions, d) == 0
+    assert (d / "gradebook.csv").read_bytes() == (graded[1] / "gradebook.csv").read_bytes()
+
+
+def test_gradebook_without_a_record_of_what_was_written_is_not_overwritten(klass, submissions, tmp_path, capsys):
+    """A file that starts like a gradebook but has no record beside it (an older release wrote it, or
+    it was pasted together by hand) may hold edits nobody can see: refused."""
+    d = tmp_path / "grades"
+    d.mkdir()
+    (d / "gradebook.csv").write_text(HEADER + "\ns01,Ada,graded,offset,offset,yes,,,,,,,,,95.0,,bonus\n")
+    before = _snapshot(d)
+    rc = _regrade(klass, submissions, d)
+    err = capsys.readouterr().err
+    assert rc == 2 and "no record" in err and "gradebook.csv" in err and _snapshot(d) == before
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda runs: (runs / "s01" / "mynotes.txt").write_text("notes\n"), "s01: holds files this tool did not "
+     "write (added: mynotes.txt)"),
+    (lambda runs: (runs / "s02" / "params.yaml").open("a").write("# tweak\n"), "s02: holds files this tool did "
+     "not write (edited: params.yaml)"),
+])
+def test_edited_run_folder_stops_grading_before_it_starts(klass, submissions, graded, tmp_path, capsys, edit,
+                                                          needle):
+    """The instructor's change in runs/<id> is not the student's fault: exit 2 naming the folder, the
+    earlier gradebook and the edited folder left as they were (it used to become an "invalid" row
+    with score 0 and exit 0)."""
+    d = tmp_path / "grades"
+    shutil.copytree(graded[1], d)
+    edit(d / "runs")
+    before = _snapshot(d)
+    rc = _regrade(klass, submissions, d)
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("error: ") and err.count("\n") == 1, err
+    assert f"{d / 'runs'}/{needle}" in err and "nothing was graded" in err, err
+    assert _snapshot(d) == before
+
+
+def _starter_like(klass, subs: Path, edit_model) -> tuple[Task, dict]:
+    """A submission of a student whose hidden cause is a term of a state equation: the issued
+    folder, the starter config changed by ``edit_model`` and the right cause named in the answer."""
+    out, key = klass
+    # Coulomb friction first: the starter's linear damping absorbs it best (the probe's case, score 70)
+    order = ("coulomb_friction", "quadratic_damping", "cubic_stiffness", "offset")
+    st = min((s for s in key["students"] if s["family"] in order), key=lambda s: order.index(s["family"]))
+    d = subs / st["id"]
+    shutil.copytree(out / "students" / st["id"], d)
+    cfg = yaml.safe_load((d / "config.yaml").read_text())
+    param = edit_model(cfg["model"], st["acts_on"])
+    (d / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    (d / "answer.yaml").write_text(yaml.safe_dump({"cause": st["family"], "parameter": param,
+                                                   "claimed_gain": 0.0}))
+    return _task(klass, subs, st["id"]), st
+
+
+def _unchanged_naming_damping(model: dict, eq: str) -> str:
+    return "c"
+
+
+def _added_input_term(model: dict, eq: str) -> str:
+    model["params"]["p_in"] = 0.0
+    model["free"].append("p_in")
+    model["equations"][eq] = f"({model['equations'][eq]}) + p_in*u"
+    return "p_in"
+
+
+@pytest.mark.parametrize("edit_model, needle", [
+    (_unchanged_naming_damping, "parameter 'c' is a parameter of the starter model"),
+    (_added_input_term, "parameter 'p_in' does not multiply a term of the cause's form"),
+])
+def test_no_parameter_credit_without_a_term_of_the_causes_form(klass, tmp_path, edit_model, needle):
+    """The starter model unchanged, naming its linear damping c, or with an added term of another form:
+    the change the parameter makes correlates with the key's term, but it is not the cause's size."""
+    task, st = _starter_like(klass, tmp_path, edit_model)
+    row = grade_one(task)
+    assert row["status"] == "graded" and row["cause_correct"] == "yes", row
+    assert row["parameter_rel_error"] == "" and needle in row["reason"], row
+    # the cause (40) and the claimed gain (10, 0 reproduces for a model no better than the starter), never
+    # the parameter's 20 points; the validation share is at most a sliver
+    assert 50.0 <= float(row["score"]) < 60.0, row

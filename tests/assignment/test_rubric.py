@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from pipeline.assignment import rubric
-from pipeline.assignment.grade import COLUMNS, KeyStudent, cause_size
+from pipeline.assignment.grade import COLUMNS, FORM_SHARE_MIN, KeyStudent, cause_projection, cause_size
 from pipeline.assignment.summary import render_summary
 from pipeline.assignment.template import Rubric
 from pipeline.config import load_config
@@ -88,6 +88,25 @@ def test_cause_size_whatever_the_sign_and_scaling_the_student_wrote(tmp_path, tr
         == pytest.approx(-0.4, rel=1e-12)
     m, _ = _model(tmp_path, {"x": "v", "v": "u - c*v - k*x + h"}, {"c": 0.6, "k": 4.0, "h": 0.3})
     assert cause_size(m, "h", _key("offset", "v", coefficient=0.3), t, U, X, None) == pytest.approx(0.3)
+
+
+def test_a_term_of_the_keys_form_is_told_from_one_that_only_correlates_with_it(tmp_path, traj):
+    """The share of the parameter's change the key's term explains: all of it for the cause's term
+    however written (scaled, negated, divided by a fixed mass), too little for the linear damping,
+    whose change -c*v still projects on sign(v) with a size of the key's order."""
+    t, U, X = traj
+    key = _key("coulomb_friction", "v", coefficient=-0.4, term="sign(v)")
+    m, _ = _model(tmp_path, {"x": "v", "v": "(u - c*v - k*x - 0.5*d*sign(v))/mm"},
+                  {"c": 0.6, "k": 4.0, "d": 0.8, "mm": 2.0})
+    size, share = cause_projection(m, "d", key, t, U, X, None)
+    assert size == pytest.approx(-0.2, rel=1e-12) and share == pytest.approx(1.0, abs=1e-12)
+    size, share = cause_projection(m, "c", key, t, U, X, None)
+    # for Gaussian v the explained share of c*v by sign(v) is 2/pi (closed form)
+    assert abs(size) > 0.1 and share == pytest.approx(2 / np.pi, abs=0.03) and share < FORM_SHARE_MIN
+    m, omap = _model(tmp_path, {"x": "v", "v": "u - c*v - k*x"}, {"c": 0.6, "k": 4.0, "b": -0.2},
+                     outputs={"x_meas": "x - b"})
+    assert cause_projection(m, "b", _key("output_offset", "output x", value=0.2), t, U, X, omap["x"]) \
+        == pytest.approx((0.2, 1.0))
 
 
 def test_cause_size_periodic_amplitude_is_phase_free(tmp_path, traj):
