@@ -204,10 +204,9 @@ def _check_ordered(key: str, sym: str, value: str, values: list) -> None:
     for v in values:
         if v is None or isinstance(v, (int, float)) and not isinstance(v, bool):
             continue
-        what = (f"a {type(v).__name__} ({'a mapping' if isinstance(v, dict) else 'a list'})"
-                if isinstance(v, (dict, list)) else f"text ({v!r})" if isinstance(v, str) else type(v).__name__)
         if isinstance(v, str) and not _is_number(value):
             continue
+        what = {dict: "a dict (a mapping)", list: "a list", str: f"text ({v!r})"}.get(type(v), type(v).__name__)
         raise InputError(f"{key!r} is {what}, and {sym} compares a number with a number or text with text that "
                          f"is not a number (got {value!r}); use = or != for {key!r}"
                          + (", or a dotted path to one of its numbers (e.g. metrics.final.validation.rmse_sim)"
