@@ -246,7 +246,8 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
                                          segment_x0(model, prob, s0, x0), res)
                 if bad is not None:
                     raise SimulationError(f"the fitted model fails on this record: the simulation produced NaN at "
-                                          f"sample {res.diverged_at}: {bad[1]} (parameters {model.params})", key=f"model.equations.{bad[0]}")
+                                          f"sample {res.diverged_at}: {bad[1]} (parameters {model.params})",
+                                          key=f"model.equations.{bad[0]}")
                 raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
                                       f"(parameters {model.params}); a parameter's physical range can be "
                                       "given in model.bounds (e.g. {a: [0, null]})")
