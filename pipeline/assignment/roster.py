@@ -30,6 +30,8 @@ def id_problem(sid: str) -> str | None:
         return f"id {sid!r} may only use letters, digits, '_', '.', '-' (at most 40)"
     if sid in (".", ".."):
         return f"id {sid!r} is not a usable folder name"
+    if sid.startswith("."):      # a hidden folder: file browsers and `sysid runs` do not list it
+        return f"id {sid!r} starts with '.', which would make the student's folders hidden"
     return None
 
 

@@ -123,6 +123,7 @@ def _cli(capsys, *args) -> tuple[int, str]:
     ("id,name\ns01,Ada\ns01,Bob\n", "row 3: id: id 's01' appears twice"),
     ("id,name\ns 1,Ada\n", "row 2: id"),
     ("id,name\n../x,Ada\n", "row 2: id"),
+    ("id,name\n.hidden,Ada\n", "row 2: id: id '.hidden' starts with '.'"),   # hidden folders (a probe)
     ("id,name\ns01,\n", "row 2: name: empty name"),
     ("id,name\n", "no students"),
     ("", "empty"),
