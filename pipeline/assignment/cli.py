@@ -42,13 +42,6 @@ def _grade(args: argparse.Namespace) -> int:
     check_new_path(runs, key="--runs" if args.runs else "--out (its runs/ folder)", folder=True)
     if out.resolve() == page.resolve():
         raise InputError("the gradebook and the summary page must be different files", key="--html")
-    subs = Path(args.submissions).resolve()
-    for what, p in (("--out", out), ("--html", page), ("--runs" if args.runs else "--out (its runs/ folder)", runs)):
-        if subs == p.resolve() or subs in p.resolve().parents:
-            # a runs/ folder there is read as a submission by the next grade, and the students' folders
-            # are the students' (an independent probe)
-            raise InputError(f"{p} is inside the submissions folder {args.submissions}; write the results "
-                             "outside it", key=what)
     check_writable(out, HEADER, "--out")
     check_writable(page, FIRST_LINE, "--html")
     key, rows = grade(args.key, args.submissions, jobs=args.jobs, executor=args.executor, runs_dir=runs)

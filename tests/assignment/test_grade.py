@@ -159,21 +159,6 @@ def test_foreign_gradebook_is_not_overwritten(klass, submissions, tmp_path, caps
     assert rc == 2
 
 
-def test_results_inside_the_submissions_folder_are_refused(klass, submissions, capsys):
-    """An independent probe wrote the gradebook into the submissions folder: its runs/ folder was then read
-    by the next grade as a submission. --out, --html and --runs must lie outside it; nothing is written."""
-    subs = submissions[0]
-    before = sorted(p.name for p in subs.iterdir())
-    for extra, needle in ((["--out", str(subs / "gb.csv")], "error: --out: "),
-                          (["--out", str(subs.parent / "gb_ok.csv"), "--runs", str(subs / "s01" / "runs")],
-                           "error: --runs: "),
-                          (["--out", str(subs.parent / "gb_ok.csv"), "--html", str(subs / "s.html")], "error: --html: ")):
-        rc = main(["grade", "--key", str(klass[0] / "key.json"), "--submissions", str(subs), *extra])
-        err = capsys.readouterr().err
-        assert rc == 2 and err.startswith(needle) and "is inside the submissions folder" in err, err
-    assert sorted(p.name for p in subs.iterdir()) == before and not (subs.parent / "gb_ok.csv").exists()
-
-
 def test_dask_executor_gives_the_same_gradebook(klass, submissions, graded, tmp_path):
     """`sysid grade --executor dask` (a Dask LocalCluster, the sysid batch executor): the same bytes."""
     pytest.importorskip("distributed")
