@@ -52,7 +52,10 @@ def _grade(args: argparse.Namespace) -> int:
     write_tracked(out, book)
     write_tracked(page, html)
     known = {r["student_id"] for r in rows}
-    extra = sorted(p.name for p in Path(args.submissions).iterdir() if p.is_dir() and p.name not in known)
+    # the results' own runs/ folder may sit among the submissions (grade --submissions . --out gb.csv):
+    # it is not a submission the key lacks
+    extra = sorted(p.name for p in Path(args.submissions).iterdir()
+                   if p.is_dir() and p.name not in known and p.resolve() != runs.resolve())
     if extra:
         print(f"note: folders not in the key, not graded: {', '.join(extra)}", file=sys.stderr)
     counts = ", ".join(f"{v} {k}" for k, v in sorted(Counter(r["status"] for r in rows).items()))

@@ -288,3 +288,24 @@ def test_no_parameter_credit_without_a_term_of_the_causes_form(klass, tmp_path, 
     # the cause (40) and the claimed gain (10, 0 reproduces for a model no better than the starter), never
     # the parameter's 20 points; the validation share is at most a sliver
     assert 50.0 <= float(row["score"]) < 60.0, row
+
+
+def test_the_results_runs_folder_among_the_submissions_is_no_submission(klass, submissions, tmp_path, capsys):
+    """A class folder with the submissions and the gradebook beside them (``--submissions class --out
+    class/gradebook.csv``): the second grade listed the results' own runs/ folder as a submission the key
+    lacks (an independent probe). It is not one; the folders the key lacks still are."""
+    cls = tmp_path / "class"
+    shutil.copytree(submissions[0], cls)
+    made = tmp_path / "made"
+    shutil.copytree(klass[0], made)
+    key = json.loads((made / "key.json").read_text())
+    key["students"] = [s for s in key["students"] if s["id"] == "s01"]     # one student: one run a grade
+    (made / "key.json").write_text(json.dumps(key))
+    for _ in range(2):
+        rc = main(["grade", "--key", str(made / "key.json"), "--submissions", str(cls),
+                   "--out", str(cls / "gradebook.csv")])
+        err = capsys.readouterr().err
+        assert rc == 0, err
+    assert (cls / "runs" / "s01").is_dir()
+    note = next(line for line in err.splitlines() if line.startswith("note: folders not in the key"))
+    assert "s02" in note and "runs" not in note.split(":", 1)[1].split(", ")
