@@ -308,4 +308,5 @@ def test_the_results_runs_folder_among_the_submissions_is_no_submission(klass, s
         assert rc == 0, err
     assert (cls / "runs" / "s01").is_dir()
     note = next(line for line in err.splitlines() if line.startswith("note: folders not in the key"))
-    assert "s02" in note and "runs" not in note.split(":", 1)[1].split(", ")
+    listed = note.rsplit(": ", 1)[1].split(", ")
+    assert "s02" in listed and "runs" not in listed
