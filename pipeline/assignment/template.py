@@ -42,7 +42,7 @@ GRADABLE_FAMILIES = ("offset", "output_offset", "cubic_stiffness", "quadratic_da
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)   # .nan got "less than or equal to 0.5"
 
 
 class RubricWeights(_Strict):

@@ -148,6 +148,7 @@ def test_bad_roster_exits_2_with_one_line(tmp_path, capsys, roster, needle):
     ("system: boat", "system"),
     ("rubric: {weights: {cause: 0, parameter: 0, validation: 0, gain: 0}}", "sum to 0"),
     ("samples: ten", "samples"),
+    ("noise: .nan", "noise: Input should be a finite number"),       # was "less than or equal to 0.5"
 ])
 def test_bad_template_exits_2_with_one_line(tmp_path, capsys, edit, needle):
     base = "name: t\nsystem: msd\nfamilies: {offset: [1, 1]}\n"
