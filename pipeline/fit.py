@@ -225,6 +225,17 @@ def simulate_until(model: Model, prob: Problem, x0: np.ndarray, stop: int) -> np
     return simulate_rows(model, prob, x0, prob.split.est[0], stop)
 
 
+def _raise_if_undefined(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, res, what: str,
+                        tail: str) -> None:
+    """SimulationError keyed ``model.equations.<state>`` when the simulation's NaN comes from an equation
+    undefined at the state before it (:func:`pipeline.simulate.undefined_equation`); otherwise nothing,
+    and the caller names the model."""
+    bad = undefined_equation(model, t, U, x0, res)
+    if bad is not None:
+        raise SimulationError(f"{what}: the simulation produced NaN at sample {res.diverged_at}: {bad[1]} {tail}",
+                              key=f"model.equations.{bad[0]}")
+
+
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
     """Free-run outputs over the whole record (the reported numbers): the estimation rows from the
     fitted (warm-up) simulation, every other row from the records' own segments (so validation samples
@@ -242,12 +253,8 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
             res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
                                   bound=prob.bound, prefiltered=True)
             if res.diverged_at is not None:
-                bad = undefined_equation(model, prob.t[s0:s1], prob.inputs(model)[s0:s1],
-                                         segment_x0(model, prob, s0, x0), res)
-                if bad is not None:
-                    raise SimulationError(f"the fitted model fails on this record: the simulation produced NaN at "
-                                          f"sample {res.diverged_at}: {bad[1]} (parameters {model.params})",
-                                          key=f"model.equations.{bad[0]}")
+                _raise_if_undefined(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
+                                    res, "the fitted model fails on this record", f"(parameters {model.params})")
                 raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
                                       f"(parameters {model.params}); a parameter's physical range can be "
                                       "given in model.bounds (e.g. {a: [0, null]})")
@@ -586,11 +593,8 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
             if why.diverged_at is None:
                 _declared_output_check(m0, prob.t[a:stop], prob.U[a:stop], why.X, prob.out_names)
             detail = why.reason(prob.t[a:stop]) if why.diverged_at is not None else "the model diverges"
-            bad = undefined_equation(m0, prob.t[a:stop], prob.inputs(m0)[a:stop], x00, why)
-            if bad is not None:     # name the equation: it is undefined where the simulation starts
-                raise SimulationError(f"the model diverges with its initial parameter values: the simulation "
-                                      f"produced NaN at sample {why.diverged_at}: {bad[1]} (model.params, model.initial)",
-                                      key=f"model.equations.{bad[0]}")
+            _raise_if_undefined(m0, prob.t[a:stop], prob.inputs(m0)[a:stop], x00, why,
+                                "the model diverges with its initial parameter values", "(model.params, model.initial)")
             raise SimulationError(f"the model diverges with its initial parameter values: {detail} "
                                   "(model.params, model.initial)")
         steps = (stop - prob.fit_segment()[0]) * model.substeps

@@ -183,6 +183,32 @@ def is_replaceable_run(folder: Path) -> bool:
     return True
 
 
+def why_not_replaceable(d: Path) -> str:
+    """What makes the existing ``d`` not a replaceable run folder, in words: the files added, edited or
+    missing against its marker (for messages only; the decision is :func:`is_replaceable_run`'s)."""
+    if d.is_symlink() or not d.is_dir():
+        return "is not a folder" if not d.is_symlink() else "is a symlink"
+    marker = read_marker(d)
+    if marker is None:
+        return f"is not a run folder of this tool (no valid {MARKER} marker)"
+    listed = marker["files"]
+    added, edited = [], []
+    for dirpath, _, filenames in os.walk(d):
+        for fn in filenames:
+            rel = str((Path(dirpath) / fn).relative_to(d))
+            if rel == MARKER:
+                continue
+            entry = listed.get(rel)
+            if entry is None:
+                added.append(rel)
+            elif isinstance(entry, dict) and entry.get("sha256") != file_sha256(Path(dirpath) / fn):
+                edited.append(rel)
+    missing = [r for r in listed if not (d / r).is_file()]
+    parts = [f"{w}: {', '.join(sorted(v)[:5])}" for w, v in (("added", added), ("edited", edited),
+                                                              ("missing", missing)) if v]
+    return "holds files this tool did not write" + (f" ({'; '.join(parts)})" if parts else "")
+
+
 def iter_run_folders(root: Path, skipped: list[Path] | None = None) -> Iterator[Path]:
     """Every complete run folder at or below ``root``, in sorted order. Hidden entries (temp and
     moved-aside folders of this tool among them) are never entered, symlinks never followed, and a

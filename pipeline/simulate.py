@@ -571,8 +571,8 @@ def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarra
     k = res.diverged_at
     if k is None or not res.nonfinite:
         return None
-    from .expressions import vectorize
-    from .model import _env
+    from dataclasses import replace
+    from .model import rhs_vectorized
     row = np.asarray(x0, float) if k == 0 else res.X[k - 1]
     j = max(k - 1, 0)
     U = np.atleast_2d(np.asarray(U, float).T).T
@@ -581,21 +581,17 @@ def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarra
         return None
     tj = np.asarray(t, float)[j:j + 1]
     with np.errstate(all="ignore"):
-        try:
-            env = _env(model, row[None, :nx], U[j:j + 1], tj)
-            for s in model.nominal_states:     # the config's own equations (an extension's terms aside)
-                e = model.equations[s]
-                names = sorted(e.names)
-                v = float(np.broadcast_to(np.asarray(vectorize(e, names)(*[env[n] for n in names]), float), (1,))[0])
-                if not np.isfinite(v):
-                    break
-            else:
-                return None
+        try:       # the config's own equations: an extension's terms aside
+            f = rhs_vectorized(replace(model, terms=()), row[None, :nx], U[j:j + 1], tj)[0]
         except (ArithmeticError, ValueError, TypeError, KeyError):
             return None
+    bad = [i for i in range(nx) if not np.isfinite(f[i])]
+    if not bad:
+        return None
+    s, v = model.states[bad[0]], f[bad[0]]
     at = ", ".join([f"{n} = {x:.6g}" for n, x in zip(model.states[:nx], row[:nx])] +
                    [f"{n} = {U[j, i]:.6g}" for i, n in enumerate(model.inputs) if i < U.shape[1]])
-    return s, (f"{s}' = {e.text} is {v} at t = {float(tj[0]):.6g} s ({at}); "
+    return s, (f"{s}' = {model.equations[s].text} is {v} at t = {float(tj[0]):.6g} s ({at}); "
                "check this equation and the parameter values")
 
 

@@ -63,7 +63,7 @@ from ..errors import InputError, SimulationError
 from ..expressions import parse, vectorize
 from ..fit import Problem, equation_error_start, fit_output_error, initial_state, simulate_full
 from ..model import Model, rhs_vectorized
-from ..runfolder import MARKER, is_replaceable_run, read_marker
+from ..runfolder import is_replaceable_run, why_not_replaceable
 from ..simulate import outputs, simulate_states
 from . import KEY_SCHEMA, rubric
 from .roster import id_problem
@@ -452,32 +452,6 @@ def _umask() -> int:
     return mask
 
 
-def _folder_problem(d: Path) -> str:
-    """What makes the existing ``d`` not a replaceable run folder, in words (for the message only;
-    the decision is :func:`pipeline.runfolder.is_replaceable_run`'s)."""
-    if d.is_symlink() or not d.is_dir():
-        return "is not a folder" if not d.is_symlink() else "is a symlink"
-    marker = read_marker(d)
-    if marker is None:
-        return f"is not a run folder of this tool (no valid {MARKER} marker)"
-    listed = marker["files"]
-    added, edited = [], []
-    for dirpath, _, filenames in os.walk(d):
-        for fn in filenames:
-            rel = str((Path(dirpath) / fn).relative_to(d))
-            if rel == MARKER:
-                continue
-            entry = listed.get(rel)
-            if entry is None:
-                added.append(rel)
-            elif isinstance(entry, dict) and entry.get("sha256") != file_sha256(Path(dirpath) / fn):
-                edited.append(rel)
-    missing = [r for r in listed if not (d / r).is_file()]
-    parts = [f"{w}: {', '.join(sorted(v)[:5])}" for w, v in (("added", added), ("edited", edited),
-                                                              ("missing", missing)) if v]
-    return "holds files this tool did not write" + (f" ({'; '.join(parts)})" if parts else "")
-
-
 def check_runs_dir(runs: Path, ids: list[str]) -> None:
     """Before any grading: each ``runs/<id>`` is absent, empty, or a run folder exactly as this tool
     wrote it (:func:`pipeline.runfolder.is_replaceable_run`, the test the run writer applies). Found
@@ -492,7 +466,7 @@ def check_runs_dir(runs: Path, ids: list[str]) -> None:
         if d.is_dir() and not d.is_symlink() and not any(os.scandir(d)):
             continue
         if not is_replaceable_run(d):
-            raise InputError(f"{_folder_problem(d)}; move it away or choose another --runs folder; nothing was "
+            raise InputError(f"{why_not_replaceable(d)}; move it away or choose another --runs folder; nothing was "
                              "graded", file=str(d))
 
 
