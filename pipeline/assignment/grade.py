@@ -49,6 +49,7 @@ import io
 import json
 import math
 import os
+import secrets
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -434,22 +435,17 @@ def write_tracked(path: Path, text: str) -> None:
     for target, payload in ((path, data), (written_record(path), (json.dumps(
             {"tool": "sysid grade", "file": path.name, "sha256": hashlib.sha256(data).hexdigest()},
             sort_keys=True) + "\n").encode())):
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        # created with mode 0o666 and the umask applied by open() itself, as any file the user writes
+        tmp = target.parent / f".{target.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp"
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         try:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(payload)
-            os.chmod(tmp, 0o666 & ~_umask())
             os.replace(tmp, target)
         except BaseException:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
             raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def check_runs_dir(runs: Path, ids: list[str]) -> None:
