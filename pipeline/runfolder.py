@@ -209,6 +209,21 @@ def why_not_replaceable(d: Path) -> str:
     return "holds files this tool did not write" + (f" ({'; '.join(parts)})" if parts else "")
 
 
+def why_not_as_written(d: Path) -> str | None:
+    """None when the run folder's files are as this tool wrote them (or it has no marker: a legacy
+    folder, read as it is), else what was changed: the marker's files edited or missing. Files added
+    beside them (a user's notes) do not change what the run says and are not counted."""
+    marker = read_marker(d)
+    if marker is None:
+        return None
+    listed = marker["files"]
+    missing = sorted(r for r in listed if not (d / r).is_file())
+    edited = sorted(r for r in listed if r not in missing and isinstance(listed[r], dict)
+                    and listed[r].get("sha256") != file_sha256(d / r))
+    parts = [f"{w}: {', '.join(v[:5])}" for w, v in (("edited", edited), ("missing", missing)) if v]
+    return f"was changed after the run ({'; '.join(parts)})" if parts else None
+
+
 def iter_run_folders(root: Path, skipped: list[Path] | None = None) -> Iterator[Path]:
     """Every complete run folder at or below ``root``, in sorted order. Hidden entries (temp and
     moved-aside folders of this tool among them) are never entered, symlinks never followed, and a

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 import yaml
 
+from . import runfolder
 from .errors import InputError
 from .tracking.dvc import dvc_metrics, flatten
 
@@ -301,7 +302,11 @@ def runs_table(runs: list[RunInfo]) -> str:
 def resolve(ref: str, root: Path = DEFAULT_ROOT) -> RunInfo:
     """A run by folder path, by run id under ``root``, or by a unique prefix of one."""
     p = Path(ref)
-    if p.is_dir() and (p / "summary.json").is_file():
+    if p.is_dir() and ((p / "summary.json").is_file() or (p / runfolder.MARKER).is_file()):
+        # a hand-edited run folder says what the tool did not compute (`sysid runs` skips it too)
+        why = runfolder.why_not_as_written(p)
+        if why:
+            raise InputError(f"{why}: its numbers are not this tool's; rerun its config", file=str(p))
         return RunInfo.load(p)
     runs = list_runs(root)
     exact = [r for r in runs if r.run_id == ref or r.path.name == ref]
@@ -318,6 +323,9 @@ def resolve(ref: str, root: Path = DEFAULT_ROOT) -> RunInfo:
         raise InputError(f"{ref!r} matches {len(pref)} runs ({listed}); "
                          + ("give the run folder's path" if same else "give more of the run id or the run folder's path"),
                          key="RUN")
+    if p.is_dir():
+        raise InputError("is a folder but not a run folder (no summary.json); give a run folder or a run id "
+                         "from `sysid runs`", file=str(p))
     raise InputError(f"no run {ref!r} under {root} (give a run folder or a run id from `sysid runs`)", key="RUN")
 
 

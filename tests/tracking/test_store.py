@@ -146,6 +146,30 @@ def test_runs_says_which_edited_run_folders_it_skips(batch_runs, tmp_path, capsy
     assert err.count("\n") == 1 and err.startswith(f"warning: skipped {edited}: its files changed after the run")
 
 
+def test_compare_refuses_an_edited_run_folder_and_names_a_folder_that_is_not_one(batch_runs, tmp_path, capsys):
+    """An independent probe set a run's verdict to ['x'] by hand and `compare` reported
+    "verdict: discrepancy -> ['x']" with exit 0; a folder without summary.json got "no run … under
+    reports". Now the edited folder is exit 2 naming the edited file (a note added beside the files is
+    fine: it changes nothing the run says), and the plain folder is named as not a run folder."""
+    import shutil
+    root = tmp_path / "runs"
+    shutil.copytree(batch_runs["root"], root)
+    a, b = (next(p for p in root.iterdir() if p.name.startswith(n)) for n in ("demo-", "demo_b"))
+    (b / "my_notes.txt").write_text("looked at this on Monday\n")
+    assert main(["compare", str(a), str(b), "--root", str(root)]) == 0
+    capsys.readouterr()
+    s = json.loads((b / "summary.json").read_text())
+    s["diagnosis"]["verdict"] = ["x"]
+    (b / "summary.json").write_text(json.dumps(s))
+    assert main(["compare", str(a), str(b), "--root", str(root)]) == 2
+    out, err = capsys.readouterr()
+    assert not out and err == f"error: {b}: was changed after the run (edited: summary.json): its numbers are " \
+                              "not this tool's; rerun its config\n"
+    (tmp_path / "plain").mkdir()
+    assert main(["compare", str(a), str(tmp_path / "plain"), "--root", str(root)]) == 2
+    assert "plain: is a folder but not a run folder (no summary.json)" in capsys.readouterr().err
+
+
 def test_metrics_and_params_follow_dvc_conventions(batch_runs):
     """DVC reads metrics as a tree of mappings with numeric leaves (lists and nulls are not metrics);
     params.yaml is what the stage consumed (the config)."""
