@@ -504,9 +504,13 @@ def _validation_message(exc: ValidationError, prefix: str = "") -> str:
             msg = "required key is missing"
         msg = msg.removeprefix("Value error, ")
         lines.append(f"{key}: {msg}")
-    # one message: the first problem, then any others
-    uniq = list(dict.fromkeys(lines))
-    return "; ".join(uniq[:5])
+    # one message: the first problem, then any others; one per key (a value that fails every branch of a
+    # union, e.g. prior_sd: -1 for "a positive number or a list of them", gets the first branch's reason,
+    # not also "Input should be a valid list")
+    first: dict[str, str] = {}
+    for line in lines:
+        first.setdefault(line.split(": ", 1)[0], line)
+    return "; ".join(list(first.values())[:5])
 
 
 def _check_name(n: str, kind: str, f: str) -> None:

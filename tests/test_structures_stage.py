@@ -138,6 +138,10 @@ def _cfg(tmp_path, **extra):
      "estimators[0].ls.foo: unknown key"),
     ({"structures": {"equation": "x", "candidates": {"A": ["x"]}}, "estimators": [{"ml": {"density": "weird"}}]},
      "estimators[0].ml.density: Input should be 'gaussian'"),
+    # a value failing both branches of "a positive number or a list of them": one reason, not also
+    # "Input should be a valid list" (an independent probe)
+    ({"structures": {"equation": "x", "candidates": {"A": ["x"]}}, "estimators": [{"map": {"prior_sd": -1}}]},
+     "estimators[0].map.prior_sd: Input should be greater than 0\n"),
     ({"structures": {"equation": "x", "candidates": {"A": ["x"]}, "sindy": {"threshold": "abc"}}},
      "structures.sindy.threshold"),
     ({"structures": {"equation": "x", "candidates": {"A": ["x"]}, "takagi_sugeno": {"rules": [0]}}},
