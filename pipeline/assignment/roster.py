@@ -4,6 +4,7 @@ ignored). Ids must be unique and made of letters, digits, ``_ . -`` (they name f
 from __future__ import annotations
 
 import csv
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,7 +47,9 @@ def load_roster(path: str | Path) -> list[Student]:
     except UnicodeDecodeError:
         raise InputError("not a UTF-8 text file", file=f) from None
     try:
-        rows = list(csv.reader(text.splitlines()))
+        # the csv module's own line handling: a quoted name may hold a line break ("Ada<newline>Lovelace"),
+        # which splitting the text into lines first turned into two rows and then "AdaLovelace"
+        rows = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
         raise InputError(f"not a valid CSV file ({exc})", file=f) from None
     rows = [r for r in rows if any(c.strip() for c in r)]
@@ -59,13 +62,17 @@ def load_roster(path: str | Path) -> list[Student]:
             found = ", ".join(header)[:60] or "nothing"
             raise InputError(f"no column {col!r} in the header (found: {found}); expected 'id,name[,email]'",
                              file=f)
+    for col in ("id", "name", "email"):
+        if header.count(col) > 1:    # which one is meant cannot be guessed
+            raise InputError(f"the header names the column {col!r} {header.count(col)} times; expected it once",
+                             file=f)
     i_id, i_name = header.index("id"), header.index("name")
     i_mail = header.index("email") if "email" in header else None
     students: list[Student] = []
     seen: dict[str, int] = {}
     for line, r in enumerate(rows[1:], start=2):
         cell = (lambda i: r[i].strip() if i is not None and i < len(r) else "")
-        sid, name = cell(i_id), cell(i_name)
+        sid, name = cell(i_id), " ".join(cell(i_name).split())   # a line break in a quoted name: a space
         problem = id_problem(sid)
         if problem:
             raise InputError(problem, file=f, key=f"row {line}: id")

@@ -127,6 +127,7 @@ def _cli(capsys, *args) -> tuple[int, str]:
     ("id,name\ns01,\n", "row 2: name: empty name"),
     ("id,name\n", "no students"),
     ("", "empty"),
+    ("id,name,id\ns01,Ada,s99\n", "the header names the column 'id' 2 times"),    # which id? (a probe)
 ])
 def test_bad_roster_exits_2_with_one_line(tmp_path, capsys, roster, needle):
     r = tmp_path / "roster.csv"
@@ -136,6 +137,18 @@ def test_bad_roster_exits_2_with_one_line(tmp_path, capsys, roster, needle):
     assert rc == 2
     assert err.startswith("error: ") and err.count("\n") == 1 and needle in err and str(r) in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_quoted_name_over_two_lines_is_one_student_with_a_space():
+    """csv's own line handling: the text was split into lines first, so a quoted name with a line break
+    became "AdaLovelace" (an independent probe)."""
+    import tempfile
+    from pipeline.assignment.roster import load_roster
+    with tempfile.TemporaryDirectory() as d:
+        r = Path(d) / "roster.csv"
+        r.write_text('id,name,email\ns01,"Ada\nLovelace",ada@x.org\ns02,Bob,\n')
+        got = load_roster(r)
+    assert [(s.id, s.name, s.email) for s in got] == [("s01", "Ada Lovelace", "ada@x.org"), ("s02", "Bob", None)]
 
 
 @pytest.mark.parametrize("edit, needle", [
