@@ -135,7 +135,13 @@ def load_key(path: str | Path) -> tuple[KeyFile, Path]:
         if file_sha256(rec) != s.instructor_record_sha256:
             raise InputError(f"the instructor's record of {s.id} differs from the one the key was made with",
                              file=str(rec))
-        load_config(base / s.starter_config)
+        # the record's length is the key's issued + held-out samples: else every submission reading it
+        # would be blamed ("the config reads 1200 samples …, expected 100400") for the key's error
+        n = load_record(load_config(base / s.starter_config)).n
+        if s.issued_samples < 1 or s.heldout_samples < 1 or s.issued_samples + s.heldout_samples != n:
+            raise InputError(f"issued_samples + heldout_samples = {s.issued_samples} + {s.heldout_samples}; the "
+                             f"instructor's record of {s.id} has {n} samples (issued and held-out parts, each at "
+                             "least 1)", file=f, key=f"students.{i}")
     return key, base
 
 

@@ -134,6 +134,12 @@ def test_missing_or_broken_submissions_give_a_row(klass, tmp_path, break_it, sta
     (lambda k, d: k.write_text(json.dumps(dict(json.loads(k.read_text()), students=[
         dict(s, id="../x") if i == 1 else s for i, s in enumerate(json.loads(k.read_text())["students"])]))),
      "key.json: students.1.id: id '../x' may only use letters"),
+    # a wrong sample count in the key blamed every student's config ("the config reads 1200 samples of the
+    # instructor's record, expected 100400"; an independent probe)
+    (lambda k, d: k.write_text(json.dumps(dict(json.loads(k.read_text()), students=[
+        dict(s, issued_samples=s["issued_samples"] + 99000) if i == 2 else s
+        for i, s in enumerate(json.loads(k.read_text())["students"])]))),
+     "key.json: students.2: issued_samples + heldout_samples = "),
 ])
 def test_instructors_bad_key_exits_2(klass, submissions, tmp_path, capsys, edit, needle):
     d = tmp_path / "class"
