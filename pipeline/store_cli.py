@@ -95,18 +95,28 @@ def cmd_batch(a: argparse.Namespace) -> int:
         check_tracking(a.track, key="--track")
     results = run_batch(a.configs, jobs=a.jobs, executor=a.executor, scheduler=a.scheduler, root=a.root,
                         html=a.html)
+    # configs with the same content and data are one run (one run id, one folder): listed and tracked once
+    first: dict[str, str] = {}
+    for r in results:
+        if r.ok:
+            first.setdefault(r.path, r.config)
+    ran = [r for r in results if r.ok]
+    folders = [r for r in ran if first[r.path] == r.config]
     if a.track:
         from .tracking.mlflow_backend import log_run, resolve_uri
         uri = resolve_uri(a.track)
-        for r in results:
-            if r.ok:
-                log_run(r.path, uri)
-        print(f"tracked {sum(r.ok for r in results)} runs in {uri}")
-    made = [store.RunInfo.load(Path(r.path)) for r in results if r.ok]
-    print(store.runs_table(made))
+        for r in folders:
+            log_run(r.path, uri)
+        print(f"tracked {len(folders)} runs in {uri}")
+    print(store.runs_table([store.RunInfo.load(Path(r.path)) for r in folders]))
+    for r in ran:
+        if first[r.path] != r.config:
+            print(f"note: {r.config} is the same run as {first[r.path]} (the same config and data): one run "
+                  f"folder, {r.path}", file=sys.stderr)
     failed = [r for r in results if not r.ok]
     for r in failed:
         print(f"error: {r.error}" if r.config in (r.error or "") else f"error: {r.config}: {r.error}",
               file=sys.stderr)
-    print(f"{len(made)} of {len(results)} configs ran" + (f"; {len(failed)} failed" if failed else ""))
+    print(f"{len(ran)} of {len(results)} configs ran" + (f" ({len(folders)} run folder{'s' * (len(folders) != 1)})" if len(folders) < len(ran) else "")
+          + (f"; {len(failed)} failed" if failed else ""))
     return exit_code(results)

@@ -34,6 +34,19 @@ def test_batch_cli_prints_the_runs_table_and_the_error(batch_runs, capsys, tmp_p
     assert err.count("error:") == 1 and "nosuch" in err and "Traceback" not in err
 
 
+def test_configs_that_are_one_run_are_listed_once_with_a_note(batch_runs, capsys, tmp_path):
+    """Two files with the same config and data are one run (one run id, one folder): an independent probe
+    saw the folder listed once per config (and `--track` would log it as that many MLflow runs)."""
+    cfgs = batch_runs["configs"]
+    copy = tmp_path / "copy_of_a.yaml"
+    copy.write_text(Path(cfgs["a"]).read_text())
+    assert main(["batch", str(cfgs["a"]), str(copy), "--jobs", "1", "--root", str(tmp_path / "r")]) == 0
+    out, err = capsys.readouterr()
+    rows = [line for line in out.splitlines() if "demo-" in line]
+    assert len(rows) == 1 and "2 of 2 configs ran (1 run folder)\n" in out, out
+    assert err.count("\n") == 1 and err.startswith(f"note: {copy} is the same run as {cfgs['a']}"), err
+
+
 def test_a_batch_where_every_config_fails_leaves_no_folder_it_made(batch_runs, capsys, tmp_path):
     """Nothing half-written: when no run succeeds, the --root folder this batch created is removed (it is
     empty, and so are the parents it created); a --root that existed before is left as it was."""
