@@ -287,7 +287,8 @@ def _check_excited(ins: dict[str, np.ndarray], rows: slice, f: str, key: str | N
     for name, u in ins.items():
         if np.ptp(u[rows]) == 0:
             raise DataError(f"{named('input', name)} is constant{where} ({float(u[rows][0]):.10g}); a constant input "
-                            "excites nothing", file=f, key=key)
+                            "excites nothing: write its value into the equations in place of the input, or add "
+                            "a record that moves it (data.experiments)", file=f, key=key)
     for name, y in (outs or {}).items():
         if np.ptp(y[rows]) == 0:
             raise DataError(f"{named('output', name)} is constant{where} ({float(y[rows][0]):.10g}); a constant "

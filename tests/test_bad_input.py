@@ -161,7 +161,8 @@ RECORD_CASES = {
     "time_not_increasing": "not strictly increasing at row 100",
     "nonuniform": "non-uniform sampling",
     "too_few": "only 20 samples",
-    "constant_input": "input 'u' is constant",
+    "constant_input": "input 'u' is constant (1.5); a constant input excites nothing: write its value into the "
+                      "equations in place of the input, or add a record that moves it (data.experiments)",
     "constant_output": "output 'x' is constant",     # used to end in an internal error (log of a zero residual)
     "missing_column": "column 'x' (output) not found",
     "non_numeric": "non-numeric value 'n/a?' at row 12",
