@@ -84,12 +84,36 @@ def _summary(tmp_path: Path, family: str, base: str, seed: int, **kw) -> dict:
 
 @pytest.mark.slow
 def test_a_nonlinearity_no_library_holds_is_unexplained_with_partial_findings(tmp_path):
-    s = _summary(tmp_path, "xexp", "pendulum", 1001, magnitude="medium", noise=0.1, input_kind="held")
+    """x·exp(−(x/x₀)²) in the msd's force equation at 2 % noise: one library form is not enough, the loop
+    needs a second static term in x, and the verdict says that the nonlinearity is of another form.
+    (Until the tanh's knee was fitted, the pendulum record below served here.)"""
+    s = _summary(tmp_path, "xexp", "msd", 1001, magnitude="medium", noise=0.02, input_kind="held")
     d = s["diagnosis"]
     assert d["verdict"] == "unexplained_discrepancy"
     statics = [f for f in d["findings"] if f["family"] in ("static_nonlinearity", "cubic_stiffness")]
-    assert len(statics) >= 2 and {f["equation"] for f in statics} == {"w"}
-    assert any(t.startswith("nonlinearity_form") and "th" in t for t in d["unexplained"]["failed_tests"])
+    assert len(statics) >= 2 and {f["equation"] for f in statics} == {"v"}
+    assert any(t.startswith("nonlinearity_form") and "in x " in t for t in d["unexplained"]["failed_tests"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("input_kind,magnitude,seed,above", [("held", "medium", 1001, 3.0), ("band", "small", 2003, 1.2)])
+def test_a_form_the_noise_cannot_tell_from_a_library_term_is_named_only_at_the_noise_level(
+        tmp_path, input_kind, magnitude, seed, above):
+    """The same kind of law on the pendulum at 10 % noise: with its knee fitted, one tanh(th/s) brings the
+    validation free-run RMSE from 3.2 (1.27) times the noise's standard deviation to within 3 % of it, and
+    every adequacy test passes; on data it never saw, the record cannot tell the two forms apart, so the
+    finding is named (verdict ``discrepancy``), which the bench scores as a miss of "unexplained" (both
+    records were ``unexplained_discrepancy`` with the knee held at the state's spread). Named only because
+    it explains the discrepancy: the final validation error is at the noise level."""
+    case = make_case("xexp", "pendulum", seed, out_dir=tmp_path, magnitude=magnitude, noise=0.1, colour="white",
+                     input_kind=input_kind)
+    with contextlib.redirect_stderr(io.StringIO()):
+        s = analyse(load_config(Path(case.dir) / "config.yaml")).summary
+    d = s["diagnosis"]
+    sigma = case.truth["noise"]["sigma"][0]
+    assert s["nominal"]["validation"]["rmse_sim"] > above * sigma
+    assert [(f["family"], f["term"][:8]) for f in d["findings"]] == [("static_nonlinearity", "tanh(th/")]
+    assert d["verdict"] == "discrepancy" and s["final"]["validation"]["rmse_sim"] < 1.05 * sigma
 
 
 @pytest.mark.slow

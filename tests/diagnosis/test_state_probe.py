@@ -30,9 +30,10 @@ def _run(case):
 
 # seeds outside the bench's tuning (0-2) and test (1000-1002) sets; on seeds 2000-2007 of these three
 # settings the probe moved exactly these two of 24 records to ``unexplained_discrepancy`` and no other
+# (the second record, pendulum band small 10 % noise seed 2003, is explained to the noise level by one
+# tanh(th/s) since its knee is fitted: test_nonlinearity_form checks it is named only there)
 @pytest.mark.parametrize("base,input_kind,magnitude,noise,seed,before", [
-    ("msd", "prbs", "large", 0.02, 2005, "colored_noise"),
-    ("pendulum", "band", "small", 0.1, 2003, "static_nonlinearity")])
+    ("msd", "prbs", "large", 0.02, 2005, "colored_noise")])
 def test_an_out_of_library_spring_is_unexplained(tmp_path, base, input_kind, magnitude, noise, seed, before):
     """Before the probe: ``colored_noise`` (white noise!) and a partial ``static_nonlinearity`` finding
     with verdict ``discrepancy``. A partial finding may stay listed; the verdict must say unexplained."""

@@ -2,20 +2,31 @@
 over the names the nominal equation already uses (its own physics, no coupling by default):
 
 * states z: ``z**2``, ``sqrt(z)`` (z > 0 on the simulated record: a square-root outflow), ``z*abs(z)``
-  (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)`` (s the
-  state's spread; sign-changing states only, on a one-signed state it is the ``offset``; not of a
-  velocity either: an odd saturating law of the velocity is friction, ``coulomb_friction``);
+  (for states that are not velocities: velocity drag is ``quadratic_damping``), ``tanh(z/s)``
+  (sign-changing states only, on a one-signed state it is the ``offset``; not of a velocity either: an
+  odd saturating law of the velocity is friction, ``coulomb_friction``). Its scale s is tested at the
+  state's spread and **estimated in the refit** (a saturating law's knee is part of its form: held at
+  the spread, −0.6·tanh(2·T1) of a thermal record with spread 0.27 was explained better by T1·|T1|,
+  then by an added sign(T1)), and named with its fitted value, ``tanh(T1/0.5)``;
 * inputs u: ``u**2`` (a lamp's power ∝ V²), ``abs(u)`` (sign-changing inputs), ``sqrt(u)`` (u > 0);
   none of them when it is affine in u on the estimation data (any g(u) of a two-level PRBS);
 * products ``z*u`` of a state and an input of the equation.
 
 Terms other families own (``x**3``, ``sign(v)``, ``v*abs(v)``, the constant) are left to them."""
 
+import math
+from dataclasses import replace
+
 import numpy as np
 
-from .base import Context, Family, Hypothesis, additive, present
+from .base import Context, Family, Hypothesis, additive, pname, present
 
 
+# the knee of tanh(z/s) is at least this share of the state's spread: below it tanh(z/s) is sign(z) but for
+# the few samples near 0, a smoothed sign, which is Coulomb friction's form (contract §2 allows it). Free,
+# the refit took the friction of the independent bench's DC motor (−F·tanh(w/ε), ε 1 % of the spread) as
+# tanh(w/0.0124) and named it a static nonlinearity (4 of 1 764 grid records)
+SCALE_MIN = 0.1
 AFFINE_RTOL = 1e-3   # a term within this relative RMS of an affine function of its input is affine
 
 
@@ -69,7 +80,7 @@ class StaticNonlinearity(Family):
 
     def hypotheses(self, ctx: Context) -> list[Hypothesis]:
         return [self._hyp(ctx, eq, g) for eq in ctx.structure.dynamic_eqs
-                for g in library(ctx, eq) if not present(ctx.model, g, eq)]
+                for g in library(ctx, eq) if not present(ctx.model, g, eq) and not _has_tanh(ctx.model, g, eq)]
 
     def _hyp(self, ctx: Context, eq: str, g: str) -> Hypothesis:
         """``sqrt(z)`` of a state is simulated as ``sqrt(maximum(z, 0))``: the state is positive on the
@@ -77,9 +88,40 @@ class StaticNonlinearity(Family):
         that empties), and a NaN there would end the refit; the finding is still named ``sqrt(z)``."""
         if g.startswith("sqrt(") and g[5:-1] in ctx.model.states:
             return additive(self.id, ctx.model, eq, f"sqrt(maximum({g[5:-1]}, 0))", name="static", suffix=g, term=g)
+        if g.startswith("tanh(") and "/" in g:
+            z, s0 = g[5:-1].split("/")
+            s = pname(ctx.model, "static_scale", eq, z)
+            # named as before the knee was freed (key and coefficient carry the scale it is tested at)
+            h = additive(self.id, ctx.model, eq, f"tanh({z}/{s})", name="static", suffix=g, term=g)
+            h.extra_params, h.fixed = {s: float(s0)}, (s,)
+            h.info = {"scale_name": s, "state": z, "scale_min": SCALE_MIN * float(s0)}
+            return h
         return additive(self.id, ctx.model, eq, g, name="static")
 
+    def refit_model(self, model, hyp, start):
+        """tanh(z/s): the scale, held at the state's spread in the test, is free in the refit, down to
+        ``SCALE_MIN`` of the spread."""
+        m = self.extend(model, hyp, start)
+        s = hyp.info.get("scale_name")
+        if not s:
+            return m
+        return replace(m, free=m.free + (s,), bounds={**m.bounds, s: (hyp.info["scale_min"], math.inf)})
+
     def describe(self, hyp, fit, val, sd):
-        c = val[hyp.coefs[0]]
-        return ({"equation": hyp.equation, "term": hyp.term, "coefficient": c, "coefficient_std": sd.get(hyp.coefs[0])},
-                f"A static term {hyp.term} is missing from the equation of {hyp.equation}: adding {c:.4g}*{hyp.term}")
+        c, term, extra = val[hyp.coefs[0]], hyp.term, {}
+        s = hyp.info.get("scale_name")
+        if s:
+            # tanh(z/s) = −tanh(z/−s): the scale is reported positive, the coefficient's sign with it
+            sv = float(val.get(s, fit.model.params[s]))
+            c, term = (c, f"tanh({hyp.info['state']}/{abs(sv):.4g})") if sv > 0 else (-c, f"tanh({hyp.info['state']}/{abs(sv):.4g})")
+            extra = {"scale": abs(sv), "scale_std": sd.get(s)}
+        return ({"equation": hyp.equation, "term": term, "coefficient": c, "coefficient_std": sd.get(hyp.coefs[0]),
+                 **extra},
+                f"A static term {term} is missing from the equation of {hyp.equation}: adding {c:.4g}*{term}")
+
+
+def _has_tanh(model, g: str, eq: str) -> bool:
+    """A tanh(z/·) term of this family is already in the equation (its scale is a fitted parameter, so
+    the text differs from the library's)."""
+    return g.startswith("tanh(") and any(t.family == "static_nonlinearity" and t.target == eq and t.text
+                                         and t.text.startswith(g.split("/")[0] + "/") for t in model.terms)
