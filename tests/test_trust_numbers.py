@@ -216,3 +216,41 @@ def test_the_report_says_which_parameters_are_unidentifiable():
     w = " ".join(first_screen(s)["warnings"])
     assert "a, b are not identifiable" in w and "rank 1 of 2" in w
     assert "as 0.7 Δa − 0.7 Δb" in w and "{" not in w      # the direction as a formula, not a dict
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the output-error sandwich is ~1.4x too small on a near-collinear triple "
+                                       "(a1, c, s correlated at 0.999): 80-83 % coverage, BENCHMARKS, thirty-second "
+                                       "session; a fix shows up as an unexpected pass")
+def test_standard_errors_of_a_near_collinear_triple_match_the_monte_carlo_spread():
+    """Two coupled thermal nodes with a saturating loss c·tanh(T1/s) beside the linear −a1·T1 (the knee
+    s = 0.5 near the state's spread, so tanh is nearly linear there and a1, c, s are nearly collinear),
+    made with solve_ivp on held inputs; the true structure is fitted to 30 noise draws. The reported
+    standard deviations should describe the estimates' spread (±30 %, as above); for a1, c and s they
+    are about 1.4 times too small, while a2 and b are right."""
+    rng = np.random.default_rng(5)
+    n, dt = 2000, 0.05
+    t = np.arange(n) * dt
+    U = np.repeat(rng.uniform(-1, 1, (n // 40 + 1, 2)), 40, axis=0)[:n]
+    truth = {"a1": 0.8, "a2": 0.4, "b": 0.5, "c": -0.6, "s": 0.5}
+
+    def rhs(tt, x):
+        u1, u2 = U[min(int(tt / dt), n - 1)]
+        return [u1 - 0.8 * x[0] - 0.5 * (x[0] - x[1]) - 0.6 * np.tanh(2 * x[0]), u2 - 0.4 * x[1] - 0.5 * (x[1] - x[0])]
+
+    X = np.zeros((n, 2))
+    for k in range(n - 1):
+        X[k + 1] = solve_ivp(rhs, (t[k], t[k + 1]), X[k], rtol=1e-10, atol=1e-12).y[:, -1]
+    model = _model({"T1": "u1 - a1*T1 - b*(T1-T2) + c*tanh(T1/s)", "T2": "u2 - a2*T2 - b*(T2-T1)"},
+                   truth, list(truth), ["u1", "u2"], intersample="zoh")
+    est, sds = [], []
+    for k in range(30):
+        Y = X + 0.003 * np.random.default_rng(1000 + k).standard_normal((n, 2))
+        fit = fit_output_error(model, Problem(t, U, Y, ["T1", "T2"], Split((0, 1400), (1400, n)), bound=1e6))
+        est.append(fit.theta)
+        sds.append(fit.std)
+    est, sds = np.array(est), np.array(sds)
+    spread = est.std(axis=0, ddof=1)
+    # unbiased within 3 Monte Carlo standard errors of the mean
+    assert np.all(np.abs(est.mean(axis=0) - list(truth.values())) <= 3 * spread / np.sqrt(len(est)))
+    np.testing.assert_allclose(sds.mean(axis=0), spread, rtol=0.3)
