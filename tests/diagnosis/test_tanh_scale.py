@@ -66,3 +66,48 @@ def test_a_saturating_heat_loss_is_one_tanh_finding_with_its_knee(tmp_path):
     # the term names the fitted knee, and the form test reads one state from it
     assert float(f["term"][len("tanh(T1/"):-1]) == pytest.approx(f["scale"], rel=1e-3)
     assert d["verdict"] == "discrepancy"
+
+
+def test_the_knee_is_searched_between_a_smoothed_sign_and_the_records_reach():
+    """On a linear mass–spring–damper record (scipy.signal.lsim), the tanh(x/s) hypothesis is tested at
+    the spread of x and refitted with s between a tenth of the spread and the 99th percentile of |x|;
+    a knee at either end is said so, without a standard deviation (an interior optimum's)."""
+    from types import SimpleNamespace
+
+    from scipy import signal
+
+    from pipeline.data import Split
+    from pipeline.diagnostics.engine import Diagnoser
+    from pipeline.diagnostics.families import FAMILY_IDS, REGISTRY
+    from pipeline.expressions import parse
+    from pipeline.fit import Problem, fit_output_error
+    from pipeline.model import Model
+
+    rng = np.random.default_rng(0)
+    n, dt = 1500, 0.02
+    t = np.arange(n) * dt
+    u = signal.lfilter([0.05], [1, -0.95], rng.normal(size=n)) * 8
+    _, y, _ = signal.lsim(signal.StateSpace([[0, 1], [-4.0, -0.6]], [[0], [1]], [[1, 0]], [[0]]), u, t, interp=True)
+    y = y + 0.01 * rng.normal(size=n)
+    allowed = {"x", "v", "u", "c", "k", "t"}
+    m = Model(("x", "v"), ("u",), {"x": parse("v", allowed), "v": parse("u - c*v - k*x", allowed)}, {},
+              {"c": 0.5, "k": 3.5}, ("c", "k"), {"x": 0.0, "v": 0.0}, intersample="foh", nominal_params=("c", "k"))
+    prob = Problem(t, u[:, None], y[:, None], ["x"], Split((0, 1000), (1000, n)), bound=1e6)
+    fit = fit_output_error(m, prob)
+    ctx = Diagnoser(prob, alpha=0.01, families=list(FAMILY_IDS), max_findings=1, seed=0, dt=dt).context(fit, 0.7)
+    fam = REGISTRY["static_nonlinearity"]
+    h = next(h for h in fam.hypotheses(ctx) if h.term.startswith("tanh(x/"))
+    x = ctx.state("x")[slice(*ctx.est)]
+    s = h.info["scale_name"]
+    assert float(h.term[len("tanh(x/"):-1]) == pytest.approx(np.std(x), rel=1e-5)
+    assert s in h.fixed and fam.extend(fit.model, h).free == fit.model.free + (h.coefs[0],)   # held in the test
+    mr = fam.refit_model(fit.model, h, {h.coefs[0]: 0.0})
+    assert s in mr.free
+    lo, hi = mr.bounds[s]
+    assert lo == pytest.approx(0.1 * np.std(x), rel=1e-5) and hi == pytest.approx(np.quantile(np.abs(x), 0.99))
+    c = h.coefs[0]
+    for value, end in ((lo, "lower"), (hi, "upper"), (0.5 * (lo + hi), None)):
+        key, sentence = fam.describe(h, SimpleNamespace(model=mr), {c: -0.3, s: value}, {c: 0.01, s: 0.02})
+        assert key["scale_at_bound"] == end and key["scale"] == value
+        assert (key["scale_std"] is None) == (end is not None)
+        assert (f"at the {end} end of the range searched" in sentence) == (end is not None)

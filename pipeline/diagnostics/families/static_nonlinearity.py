@@ -27,6 +27,11 @@ from .base import Context, Family, Hypothesis, additive, pname, present
 # the refit took the friction of the independent bench's DC motor (−F·tanh(w/ε), ε 1 % of the spread) as
 # tanh(w/0.0124) and named it a static nonlinearity (4 of 1 764 grid records)
 SCALE_MIN = 0.1
+# and at most the 99th percentile of |z| on the estimation part: the record must reach the knee (tanh(1) =
+# 0.76). Above it tanh(z/s) = z/s − (z/s)³/3 + … on the data, a linear plus a cubic term: free, the refit
+# took a hardening spring (k3·x³, two-causes bench, delay + cubic, seed 2008) as 5.97·tanh(x/0.83),
+# knee 4 times the spread, and named it over the cubic stiffness (0.5 criterion units apart)
+SCALE_MAX_QUANTILE = 0.99
 AFFINE_RTOL = 1e-3   # a term within this relative RMS of an affine function of its input is affine
 
 
@@ -94,30 +99,39 @@ class StaticNonlinearity(Family):
             # named as before the knee was freed (key and coefficient carry the scale it is tested at)
             h = additive(self.id, ctx.model, eq, f"tanh({z}/{s})", name="static", suffix=g, term=g)
             h.extra_params, h.fixed = {s: float(s0)}, (s,)
-            h.info = {"scale_name": s, "state": z, "scale_min": SCALE_MIN * float(s0)}
+            top = float(np.quantile(np.abs(ctx.state(z)[slice(*ctx.est)]), SCALE_MAX_QUANTILE))
+            h.info = {"scale_name": s, "state": z, "scale_min": SCALE_MIN * float(s0),
+                      "scale_max": max(top, float(s0))}
             return h
         return additive(self.id, ctx.model, eq, g, name="static")
 
     def refit_model(self, model, hyp, start):
-        """tanh(z/s): the scale, held at the state's spread in the test, is free in the refit, down to
-        ``SCALE_MIN`` of the spread."""
+        """tanh(z/s): the scale, held at the state's spread in the test, is free in the refit, between
+        ``SCALE_MIN`` of the spread and the ``SCALE_MAX_QUANTILE`` quantile of |z|."""
         m = self.extend(model, hyp, start)
         s = hyp.info.get("scale_name")
         if not s:
             return m
-        return replace(m, free=m.free + (s,), bounds={**m.bounds, s: (hyp.info["scale_min"], math.inf)})
+        return replace(m, free=m.free + (s,), bounds={**m.bounds, s: (hyp.info["scale_min"], hyp.info["scale_max"])})
 
     def describe(self, hyp, fit, val, sd):
-        c, term, extra = val[hyp.coefs[0]], hyp.term, {}
+        c, term, extra, note = val[hyp.coefs[0]], hyp.term, {}, ""
         s = hyp.info.get("scale_name")
         if s:
-            # tanh(z/s) = −tanh(z/−s): the scale is reported positive, the coefficient's sign with it
             sv = float(val.get(s, fit.model.params[s]))
-            c, term = (c, f"tanh({hyp.info['state']}/{abs(sv):.4g})") if sv > 0 else (-c, f"tanh({hyp.info['state']}/{abs(sv):.4g})")
-            extra = {"scale": abs(sv), "scale_std": sd.get(s)}
+            term = f"tanh({hyp.info['state']}/{sv:.4g})"
+            lo, hi = fit.model.bounds.get(s, (-math.inf, math.inf))
+            tol = 1e-9 * max(1.0, abs(sv))
+            bound = "lower" if sv - lo <= tol else "upper" if hi - sv <= tol else None
+            # at a bound the standard deviation is an interior optimum's and describes nothing
+            extra = {"scale": sv, "scale_std": None if bound else sd.get(s), "scale_at_bound": bound}
+            if bound:
+                note = (f" (its knee is at the {bound} end of the range searched, "
+                        + ("a tenth of the state's spread: a sharper law is a smoothed sign)" if bound == "lower"
+                           else "the 99th percentile of the state: the record does not reach a flatter knee)"))
         return ({"equation": hyp.equation, "term": term, "coefficient": c, "coefficient_std": sd.get(hyp.coefs[0]),
                  **extra},
-                f"A static term {term} is missing from the equation of {hyp.equation}: adding {c:.4g}*{term}")
+                f"A static term {term} is missing from the equation of {hyp.equation}{note}: adding {c:.4g}*{term}")
 
 
 def _has_tanh(model, g: str, eq: str) -> bool:
