@@ -6,15 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import signal
 
-from pipeline.data import Split
-from pipeline.diagnostics.engine import Diagnoser
 from pipeline.diagnostics.families import FAMILY_IDS, REGISTRY
 from pipeline.diagnostics.families.base import Family
 from pipeline.expressions import parse
-from pipeline.fit import Problem, fit_output_error
-from pipeline.model import Model
+from pipeline.fit import fit_output_error
 
 KEYS = {  # contract §2 key parameters
     "offset": {"equation", "coefficient"}, "output_offset": {"output", "value"},
@@ -27,23 +23,6 @@ KEYS = {  # contract §2 key parameters
 }
 
 
-@pytest.fixture(scope="module")
-def setting():
-    rng = np.random.default_rng(0)
-    n, dt = 1500, 0.02
-    t = np.arange(n) * dt
-    u = signal.lfilter([0.05], [1, -0.95], rng.normal(size=n)) * 8
-    sys = signal.StateSpace([[0, 1], [-4.0, -0.6]], [[0], [1]], [[1, 0]], [[0]])
-    _, y, _ = signal.lsim(sys, u, t, interp=True)
-    y = y + 0.01 * rng.normal(size=n)
-    allowed = {"x", "v", "u", "c", "k", "t"}
-    m = Model(("x", "v"), ("u",), {"x": parse("v", allowed), "v": parse("u - c*v - k*x", allowed)}, {},
-              {"c": 0.5, "k": 3.5}, ("c", "k"), {"x": 0.0, "v": 0.0}, intersample="foh", nominal_params=("c", "k"))
-    prob = Problem(t, u[:, None], y[:, None], ["x"], Split((0, 1000), (1000, n)), bound=1e6)
-    fit = fit_output_error(m, prob)
-    dg = Diagnoser(prob, alpha=0.01, families=list(FAMILY_IDS), max_findings=1, seed=0, dt=dt)
-    ctx = dg.context(fit, 0.7)
-    return dg, fit, ctx
 
 
 def test_the_registry_is_the_contract_vocabulary():
@@ -53,8 +32,8 @@ def test_the_registry_is_the_contract_vocabulary():
 
 
 @pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
-def test_family_conforms(setting, fid):
-    dg, fit, ctx = setting
+def test_family_conforms(linear_msd, fid):
+    dg, fit, ctx = linear_msd
     fam = REGISTRY[fid]
     hyps = fam.hypotheses(ctx)
     assert hyps, f"{fid}: no hypothesis on a mass-spring-damper"
@@ -86,10 +65,10 @@ def test_family_conforms(setting, fid):
 
 
 @pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
-def test_a_null_reused_from_the_fit_is_the_fit(setting, fid):
+def test_a_null_reused_from_the_fit_is_the_fit(linear_msd, fid):
     """Where the engine skips the null simulation (an additive term at 0, or a family that declares
     ``null_is_current``), simulating the hypothesis at its null must give the fit's own output."""
-    dg, fit, ctx = setting
+    dg, fit, ctx = linear_msd
     est = slice(*dg.prob.split.est)
     for h in REGISTRY[fid].hypotheses(ctx):
         if not dg._null_is_current(h):
@@ -99,13 +78,13 @@ def test_a_null_reused_from_the_fit_is_the_fit(setting, fid):
 
 
 @pytest.mark.parametrize("fid", [f for f in FAMILY_IDS if REGISTRY[f].stage == "structural"])
-def test_estimate_without_an_added_term_test(setting, fid):
+def test_estimate_without_an_added_term_test(linear_msd, fid):
     """A likelihood-ratio screen refits its hypothesis even when the sensitivity could not be simulated
     or was all zero (``Diagnoser.sensitivity`` returns None, so there is no Wald result to start from):
     the family's refit must start from its null then, not fail. parameter_jump read the Wald estimate
     unconditionally, and the heating-system record in other units ended in an internal error."""
     from pipeline.diagnostics.engine import Candidate
-    dg, fit, ctx = setting
+    dg, fit, ctx = linear_msd
     hyps = REGISTRY[fid].hypotheses(ctx)
     for h in [h for h in hyps if h.info.get("lr_screen")][:1] or hyps[:1]:
         f = dg.estimate(fit, Candidate(h, None, 1.0, []))
@@ -120,11 +99,11 @@ def test_some_family_settles():
 
 
 @pytest.mark.parametrize("fid", SETTLING)
-def test_a_settled_model_equals_the_extension_after_it_acts(setting, fid):
+def test_a_settled_model_equals_the_extension_after_it_acts(linear_msd, fid):
     """``Family.settled``: after the sample interval holding ``acts_from`` the settled model (no
     programs of the extension) simulates exactly what the extension does, from the same state."""
     from pipeline.simulate import simulate_states
-    dg, fit, ctx = setting
+    dg, fit, ctx = linear_msd
     fam = REGISTRY[fid]
     prob = dg.prob
     hyps = [h for h in fam.hypotheses(ctx) if h.acts_from is not None]

@@ -68,33 +68,15 @@ def test_a_saturating_heat_loss_is_one_tanh_finding_with_its_knee(tmp_path):
     assert d["verdict"] == "discrepancy"
 
 
-def test_the_knee_is_searched_between_a_smoothed_sign_and_the_records_reach():
+def test_the_knee_is_searched_between_a_smoothed_sign_and_the_records_reach(linear_msd):
     """On a linear mass–spring–damper record (scipy.signal.lsim), the tanh(x/s) hypothesis is tested at
     the spread of x and refitted with s between a tenth of the spread and the 99th percentile of |x|;
     a knee at either end is said so, without a standard deviation (an interior optimum's)."""
     from types import SimpleNamespace
 
-    from scipy import signal
+    from pipeline.diagnostics.families import REGISTRY
 
-    from pipeline.data import Split
-    from pipeline.diagnostics.engine import Diagnoser
-    from pipeline.diagnostics.families import FAMILY_IDS, REGISTRY
-    from pipeline.expressions import parse
-    from pipeline.fit import Problem, fit_output_error
-    from pipeline.model import Model
-
-    rng = np.random.default_rng(0)
-    n, dt = 1500, 0.02
-    t = np.arange(n) * dt
-    u = signal.lfilter([0.05], [1, -0.95], rng.normal(size=n)) * 8
-    _, y, _ = signal.lsim(signal.StateSpace([[0, 1], [-4.0, -0.6]], [[0], [1]], [[1, 0]], [[0]]), u, t, interp=True)
-    y = y + 0.01 * rng.normal(size=n)
-    allowed = {"x", "v", "u", "c", "k", "t"}
-    m = Model(("x", "v"), ("u",), {"x": parse("v", allowed), "v": parse("u - c*v - k*x", allowed)}, {},
-              {"c": 0.5, "k": 3.5}, ("c", "k"), {"x": 0.0, "v": 0.0}, intersample="foh", nominal_params=("c", "k"))
-    prob = Problem(t, u[:, None], y[:, None], ["x"], Split((0, 1000), (1000, n)), bound=1e6)
-    fit = fit_output_error(m, prob)
-    ctx = Diagnoser(prob, alpha=0.01, families=list(FAMILY_IDS), max_findings=1, seed=0, dt=dt).context(fit, 0.7)
+    _, fit, ctx = linear_msd
     fam = REGISTRY["static_nonlinearity"]
     h = next(h for h in fam.hypotheses(ctx) if h.term.startswith("tanh(x/"))
     x = ctx.state("x")[slice(*ctx.est)]
