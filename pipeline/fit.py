@@ -416,16 +416,20 @@ def param_bounds(model: Model, n_x0: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo, float), np.array(hi, float)
 
 
+def bound_side(model: Model, name: str, value: float) -> str | None:
+    """"lower" or "upper" when ``value`` of parameter ``name`` sits on that bound of ``model.bounds``
+    (within 1e-9 relative), else None."""
+    lo, hi = model.bounds.get(name, (-math.inf, math.inf))
+    tol = 1e-9 * max(1.0, abs(value))
+    if np.isfinite(lo) and value - lo <= tol:
+        return "lower"
+    return "upper" if np.isfinite(hi) and hi - value <= tol else None
+
+
 def at_bounds(fit: "FitResult") -> list[str]:
-    """The free parameters a fit ended on one of their bounds (within 1e-9 relative): their standard
+    """The free parameters a fit ended on one of their bounds (:func:`bound_side`): their standard
     errors are those of an interior optimum and do not describe a constrained estimate."""
-    lb, ub = param_bounds(fit.model)
-    out = []
-    for k, v, lo, hi in zip(fit.model.free, fit.theta, lb, ub):
-        tol = 1e-9 * max(1.0, abs(v))
-        if (np.isfinite(lo) and v - lo <= tol) or (np.isfinite(hi) and hi - v <= tol):
-            out.append(k)
-    return out
+    return [k for k, v in zip(fit.model.free, fit.theta) if bound_side(fit.model, k, float(v))]
 
 
 STABLE_REL_STEP = 1e-4   # stable_jacobian's first relative step

@@ -183,6 +183,21 @@ def is_replaceable_run(folder: Path) -> bool:
     return True
 
 
+def _changes(d: Path, listed: dict, *, added: bool) -> list[tuple[str, list[str]]]:
+    """The files of run folder ``d`` edited or missing against its marker's list (and, with ``added``,
+    the files below it that the list does not hold), as (word, sorted names) pairs that are not empty."""
+    edited = sorted(r for r, entry in listed.items() if isinstance(entry, dict) and (d / r).is_file()
+                    and entry.get("sha256") != file_sha256(d / r))
+    missing = sorted(r for r in listed if not (d / r).is_file())
+    extra = sorted(rel for dirpath, _, filenames in os.walk(d) for fn in filenames
+                   if (rel := str((Path(dirpath) / fn).relative_to(d))) != MARKER and rel not in listed) if added else []
+    return [(w, v) for w, v in (("added", extra), ("edited", edited), ("missing", missing)) if v]
+
+
+def _words(changes: list[tuple[str, list[str]]]) -> str:
+    return "; ".join(f"{w}: {', '.join(v[:5])}" for w, v in changes)
+
+
 def why_not_replaceable(d: Path) -> str:
     """What makes the existing ``d`` not a replaceable run folder, in words: the files added, edited or
     missing against its marker (for messages only; the decision is :func:`is_replaceable_run`'s)."""
@@ -191,22 +206,8 @@ def why_not_replaceable(d: Path) -> str:
     marker = read_marker(d)
     if marker is None:
         return f"is not a run folder of this tool (no valid {MARKER} marker)"
-    listed = marker["files"]
-    added, edited = [], []
-    for dirpath, _, filenames in os.walk(d):
-        for fn in filenames:
-            rel = str((Path(dirpath) / fn).relative_to(d))
-            if rel == MARKER:
-                continue
-            entry = listed.get(rel)
-            if entry is None:
-                added.append(rel)
-            elif isinstance(entry, dict) and entry.get("sha256") != file_sha256(Path(dirpath) / fn):
-                edited.append(rel)
-    missing = [r for r in listed if not (d / r).is_file()]
-    parts = [f"{w}: {', '.join(sorted(v)[:5])}" for w, v in (("added", added), ("edited", edited),
-                                                              ("missing", missing)) if v]
-    return "holds files this tool did not write" + (f" ({'; '.join(parts)})" if parts else "")
+    changes = _changes(d, marker["files"], added=True)
+    return "holds files this tool did not write" + (f" ({_words(changes)})" if changes else "")
 
 
 def why_not_as_written(d: Path) -> str | None:
@@ -214,14 +215,8 @@ def why_not_as_written(d: Path) -> str | None:
     folder, read as it is), else what was changed: the marker's files edited or missing. Files added
     beside them (a user's notes) do not change what the run says and are not counted."""
     marker = read_marker(d)
-    if marker is None:
-        return None
-    listed = marker["files"]
-    missing = sorted(r for r in listed if not (d / r).is_file())
-    edited = sorted(r for r in listed if r not in missing and isinstance(listed[r], dict)
-                    and listed[r].get("sha256") != file_sha256(d / r))
-    parts = [f"{w}: {', '.join(v[:5])}" for w, v in (("edited", edited), ("missing", missing)) if v]
-    return f"was changed after the run ({'; '.join(parts)})" if parts else None
+    changes = _changes(d, marker["files"], added=False) if marker is not None else []
+    return f"was changed after the run ({_words(changes)})" if changes else None
 
 
 def iter_run_folders(root: Path, skipped: list[Path] | None = None) -> Iterator[Path]:

@@ -14,11 +14,11 @@ over the names the nominal equation already uses (its own physics, no coupling b
 
 Terms other families own (``x**3``, ``sign(v)``, ``v*abs(v)``, the constant) are left to them."""
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
+from ...fit import bound_side
 from .base import Context, Family, Hypothesis, additive, pname, present
 
 
@@ -120,9 +120,7 @@ class StaticNonlinearity(Family):
         if s:
             sv = float(val.get(s, fit.model.params[s]))
             term = f"tanh({hyp.info['state']}/{sv:.4g})"
-            lo, hi = fit.model.bounds.get(s, (-math.inf, math.inf))
-            tol = 1e-9 * max(1.0, abs(sv))
-            bound = "lower" if sv - lo <= tol else "upper" if hi - sv <= tol else None
+            bound = bound_side(fit.model, s, sv)
             # at a bound the standard deviation is an interior optimum's and describes nothing
             extra = {"scale": sv, "scale_std": None if bound else sd.get(s), "scale_at_bound": bound}
             if bound:
