@@ -91,7 +91,8 @@ def cosine_transform(x: np.ndarray, b: int) -> np.ndarray:
     return y[1:b + 1] * (math.sqrt(2.0 / n) / 2.0)
 
 
-def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None, *, ny: int = 1,
+                 var: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per column a of s: bias factor κ_a and Satterthwaite degrees of freedom ν_a of the EWC estimate
     of the long-run variance of scores s_{t,a} ε_t when ε is white and replaced by its least-squares
     residual on the columns of x (N×k), given the design (Bell & McCaffrey 2002, bias-reduced
@@ -101,7 +102,14 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
     σ²C, C = WᵀMW, so E Σ_j Λ_j² = σ² tr C (the unprojected, stationary value is σ² tr WᵀW: κ is their
     ratio) and var Σ_j Λ_j² = 2σ⁴ tr C², i.e. ν = (tr C)²/tr C². Two effects of smooth regressors are
     in it: the projection removes the lowest frequencies, where the estimate lives (κ < 1), and a
-    slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom."""
+    slowly varying s_t² makes the Λ_j correlated, so B cosines carry fewer than B degrees of freedom.
+
+    ``ny`` > 1: the rows of x and s are N samples × ny outputs, sample-major, and the score of sample t
+    sums its outputs, g_{t,a} = Σ_o s_{(t,o),a} ε_{t,o} (an output-error fit of several outputs,
+    :func:`pipeline.fit.score_rows`); ``var`` (ny,) are the outputs' residual variances (ε_{t,o} white
+    with variance var_o; ones when omitted). See :func:`_design_terms_outputs`."""
+    if ny > 1 or var is not None:
+        return _design_terms_outputs(x, s, b, ny, np.ones(ny) if var is None else np.asarray(var, float))
     x, s = _fast_rows(x), _fast_rows(s)
     n = x.shape[0]
     b = int(min(ewc_dof(n) if b is None else b, n // 2))
@@ -135,6 +143,59 @@ def design_terms(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[np
         if tr > 0:
             kap[a], nus[a] = tr / tot, tr * tr / tc2
     return kap, nus
+
+
+def _design_terms_outputs(x: np.ndarray, s: np.ndarray, b: int | None, ny: int,
+                          var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`design_terms` for rows of N samples × ny outputs (sample-major) whose white errors have
+    per-output variances Σ = diag(var_o) (the weighted outputs of one fit are not equally well fitted).
+
+    The cosine weights act on the sample index: W_a = [cos_j(t) s_{(t,o),a}] (Nny×B), Λ = W_aᵀMε with
+    M = I − QQᵀ (Q an orthonormal basis of x over all Nny rows), so
+    C = cov Λ = W_aᵀMΣMW_a = W_aᵀΣW_a − A Pᵀ − P Aᵀ + A (QᵀΣQ) Aᵀ with A = W_aᵀQ and P = W_aᵀΣQ;
+    κ_a = tr C / tr W_aᵀΣW_a and ν_a = (tr C)²/tr C² as for one output. Every term is a sum over samples
+    of per-sample sums over the outputs, so it is the one-output computation on those sums: W_aᵀΣW_a is
+    the Toeplitz-plus-Hankel matrix of the DCT of Σ_o var_o s², A and P the DCTs of Σ_o s Q and
+    Σ_o var_o s Q. For ny = 1 and var = 1 it equals :func:`design_terms` (checked in
+    ``tests/diagnosis/test_hac.py`` against C formed from its definition). C is formed (B×B); beyond
+    ``OUTPUTS_MAX_B`` cosines (records of about 240 000 samples) the classic (Nny − k)/(Nny) and ν = B are
+    returned instead."""
+    x, s = np.asarray(x, float), np.asarray(s, float)
+    n = x.shape[0] // ny
+    m = _fast_len(n)
+    x, s = x[(n - m) * ny:], s[(n - m) * ny:]
+    n = m
+    b = int(min(ewc_dof(n) if b is None else b, n // 2))
+    p = s.shape[1]
+    if b > OUTPUTS_MAX_B or b < 1:
+        k = x.shape[1]
+        return np.full(p, max(n * ny - k, 1) / (n * ny)), np.full(p, float(max(b, 1)))
+    q = qr(np.array(x, order="F"), mode="economic", check_finite=False, overwrite_a=True)[0]   # (Nny, k)
+    k = q.shape[1]
+    sig = np.tile(var, n)
+    g = q.T @ (q * sig[:, None])                                                   # QᵀΣQ
+    it, ih = _toeplitz_hankel_index(b)
+    scale = math.sqrt(2.0 / n) / 2.0
+    kap, nus = np.ones(p), np.full(p, float(b))
+    for a in range(p):
+        sa = s[:, a]
+        y = np.concatenate([dct((sig * sa * sa).reshape(n, ny).sum(axis=1), type=2), [0.0]]) / 2.0
+        wsw = (y[it] + y[ih]) / n                                                  # W_aᵀΣW_a
+        tot = float(np.trace(wsw))
+        if tot <= 0:
+            continue
+        qs = (q * sa[:, None]).reshape(n, ny, k).sum(axis=1).T                     # (k, N): Σ_o s Q
+        qss = (q * (sig * sa)[:, None]).reshape(n, ny, k).sum(axis=1).T            # Σ_o var s Q
+        A = (dct(qs, type=2, axis=-1)[:, 1:b + 1] * scale).T
+        P = (dct(qss, type=2, axis=-1)[:, 1:b + 1] * scale).T
+        c = wsw - A @ P.T - P @ A.T + A @ g @ A.T
+        tr = float(np.trace(c))
+        if tr > 0:
+            kap[a], nus[a] = tr / tot, tr * tr / float(np.sum(c * c))
+    return kap, nus
+
+
+OUTPUTS_MAX_B = 1500    # _design_terms_outputs forms B×B matrices up to this many cosines
 
 
 def _trace_c2(y: np.ndarray, b: int, wq: np.ndarray) -> float:
@@ -211,8 +272,13 @@ def _fast_rows(a: np.ndarray) -> np.ndarray:
     is under 0.5 % of N above 4096, and κ, ν are smooth averages over the sample (they change by
     O(gap/N); checked against the untrimmed values in tests/diagnosis/test_mc_calibration.py)."""
     n = a.shape[0]
+    return a if n < FAST_FROM else a[n - _fast_len(n):]
+
+
+def _fast_len(n: int) -> int:
+    """The largest 11-smooth length ≤ n from ``FAST_FROM`` on (n itself below it); see :func:`_fast_rows`."""
     if n < FAST_FROM:
-        return a
+        return n
     m = _FAST_M.get(n)
     if m is None:
         m = n
@@ -221,7 +287,7 @@ def _fast_rows(a: np.ndarray) -> np.ndarray:
         if len(_FAST_M) > 4096:
             _FAST_M.clear()
         _FAST_M[n] = m
-    return a[n - m:]
+    return m
 
 
 def design_correction(x: np.ndarray, s: np.ndarray, b: int | None = None) -> tuple[float, float]:

@@ -403,6 +403,32 @@ def test_design_correction_with_many_cosines_equals_its_definition():
         assert nu[a] == pytest.approx(np.trace(C) ** 2 / np.sum(C * C), rel=1e-10)
 
 
+def test_design_correction_of_several_outputs_equals_its_definition():
+    """Rows of N samples × 2 outputs (sample-major), the score of a sample summed over its outputs, the
+    outputs' white errors with variances 1 and 4: W_a[(t, o), j] = cos_j(t)·s_{(t,o),a} built
+    explicitly, M = I − x x⁺, Σ = diag(var), C = W_aᵀMΣMW_a; κ = tr C / tr W_aᵀΣW_a and
+    ν = (tr C)²/tr C². With one output and unit variance the outputs' path equals the one-output one."""
+    rng = np.random.default_rng(24)
+    n, ny, b = 160, 2, 11
+    x = _ar(rng, 0.9, (n * ny, 3), 100)
+    s = np.column_stack([x[:, 0] + 0.3 * rng.standard_normal(n * ny), _ar(rng, 0.95, n * ny, 100)])
+    var = np.array([1.0, 4.0])
+    t = (np.arange(n) + 0.5) / n
+    cos = np.repeat(np.cos(np.pi * np.outer(np.arange(1, b + 1), t)) * math.sqrt(2.0 / n), ny, axis=1)   # B×(N ny)
+    M = np.eye(n * ny) - x @ np.linalg.pinv(x)
+    sig = np.diag(np.tile(var, n))
+    kap, nu = hac.design_terms(x, s, b, ny=ny, var=var)
+    for a in range(2):
+        W = (cos * s[:, a]).T
+        C = W.T @ M @ sig @ M @ W
+        assert kap[a] == pytest.approx(np.trace(C) / np.trace(W.T @ sig @ W), rel=1e-10)
+        assert nu[a] == pytest.approx(np.trace(C) ** 2 / np.sum(C * C), rel=1e-10)
+    one = hac.design_terms(x[:n], s[:n], b, var=np.ones(1))
+    ref = hac.design_terms(x[:n], s[:n], b)
+    np.testing.assert_allclose(one[0], ref[0], rtol=1e-10)
+    np.testing.assert_allclose(one[1], ref[1], rtol=1e-10)
+
+
 def test_trace_c2_falls_back_when_the_projection_removes_nearly_everything(monkeypatch):
     """When (Wᵀq)(Wᵀq)ᵀ nearly equals WᵀW the three-term difference cancels (1 % wrong here without the
     guard); the explicit form is used then."""
