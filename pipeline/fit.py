@@ -279,17 +279,22 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.nda
     rows g_t = Σ_outputs J_t e_t at θ̂): the sandwich (JᵀJ)⁺ Ω̂ (JᵀJ)⁺ (White 1982; Ljung 1999 §9.3,
     eq. 9.55 for correlated residuals) with Ω̂ the prewhitened equal-weighted-cosine long-run covariance
     of the score rows (:func:`pipeline.hac.long_run`, B = 0.4 N^{2/3} cosines). The residual is a
-    least-squares residual on J's columns, which removes the low frequencies the estimate lives on: each
-    score column's long-run variance is divided by its bias factor κ_a (:func:`pipeline.hac.design_terms`,
-    Bell & McCaffrey 2002; ≈ 1 − p/N for a rough Jacobian, the classic N/(N − p)). With several outputs
-    (rows sample-major, ``ny``) κ_a and ν_a are those of the scores summed over each sample's outputs,
-    the outputs' white errors with variances ``output_var`` (the weighted residual's mean square per
-    output). Until the thirty-third session several outputs used the classic factor and ν = B: on two
-    coupled thermal nodes with a near-collinear triple (a1·T1 beside c·tanh(T1/s), both temperatures
-    measured) the 95 % intervals of a1, c, s covered 90.5–92.5 % in 400 solve_ivp noise draws; with the
-    design terms 94–95.8 % (``tests/test_trust_numbers.py``). It is formed in the same scaled
-    coordinates, on the kept directions only:
-    cov = D (V_k S_k⁻²V_kᵀ)(D Ω̂ D)(V_k S_k⁻² V_kᵀ) D. For white residuals Ω̂ ≈ σ̂² JᵀJ and the two
+    least-squares residual on J's columns, which removes the low frequencies the estimate lives on: the
+    variance of each parameter is divided by the bias factor κ_a (:func:`pipeline.hac.design_terms`,
+    Bell & McCaffrey 2002; ≈ 1 − p/N for a rough Jacobian, the classic N/(N − p)) of the scores along
+    its influence direction z_a = J (JᵀJ)⁺ e_a, the linear combination of score columns whose long-run
+    variance *is* that parameter's (covariances by √(κ_a κ_b)). With several outputs (rows
+    sample-major, ``ny``) κ_a and ν_a are those of the scores summed over each sample's outputs, the
+    outputs' white errors with variances ``output_var`` (the weighted residual's mean square per output).
+
+    Why the influence direction and not each score column: on two coupled thermal nodes with a
+    near-collinear triple (a1·T1 beside c·tanh(T1/s), correlated at 0.99+), the columns' κ are 0.78–0.91
+    but the weak direction the triple's variances live on has κ ≈ 0.68, so their standard deviations
+    were 1.12–1.13 times too small (400 solve_ivp noise draws, one output or both); along the influence
+    directions 1.00–1.01, the other parameters unchanged (``tests/test_trust_numbers.py``). Until the
+    thirty-third session several outputs also used the classic factor and ν = B (a1, c, s covered 90.5,
+    92, 92.5 %). It is formed in the same scaled coordinates, on the kept directions only:
+    cov = D (V_k S_k⁻²V_kᵀ)(D Ω̂ D)(V_k S_k⁻² V_kᵀ) D / √(κκᵀ). For white residuals Ω̂ ≈ σ̂² JᵀJ and the two
     agree; for smooth residuals the sandwich is the one that covers. The estimate's degrees of freedom ν
     (Satterthwaite; the smallest over the parameters) are returned in ``Identifiability.cov_dof``:
     θ̂ ± t_{ν,0.975}·std is the 95 % interval."""
@@ -313,15 +318,15 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.nda
         n_r, n = J.shape[0], gs.shape[0]
         b = ewc_dof(n)
         if n > p + 8 and np.all(norms > 0):
-            kap, nus = design_terms(Js, Js, b) if ny == 1 else \
-                design_terms(Js, Js, b, ny=ny, var=np.ones(ny) if output_var is None else output_var)
+            z = Js @ bread                              # each parameter's influence direction
+            kap, nus = design_terms(Js, z, b) if ny == 1 else \
+                design_terms(Js, z, b, ny=ny, var=np.ones(ny) if output_var is None else output_var)
             kap = np.maximum(kap, 0.05)
         else:
             kap, nus = np.full(p, max(n_r - p, 1) / n_r), np.full(p, float(b))
         lr = long_run(gs, dof=b, base_dof=float(np.min(nus)))
         cov_dof = lr.dof
-        om = lr.omega / np.sqrt(np.outer(kap, kap))
-        cov = d[:, None] * (bread @ om @ bread) * d[None, :]
+        cov = d[:, None] * ((bread @ lr.omega @ bread) / np.sqrt(np.outer(kap, kap))) * d[None, :]
         cov = 0.5 * (cov + cov.T)
     null = V[:, ~keep]
     bad = set(np.flatnonzero(norms == 0))
