@@ -68,6 +68,15 @@ def satterthwaite_dof(b: float, rho: np.ndarray, var_rho: np.ndarray) -> float:
     return float(2.0 / (2.0 / b + extra))
 
 
+def dof_with_base(dof: float, base_used: float, base: np.ndarray) -> np.ndarray:
+    """The degrees of freedom :func:`satterthwaite_dof` gives the same prewhitened estimate when its EWC
+    part has ``base`` degrees of freedom instead of ``base_used``: its recolouring term
+    2/ν − 2/b_used is kept, ν' = 2/(2/b' + that term). Used for each parameter's own ν beside the
+    smallest one (:func:`pipeline.fit.scaled_covariance`)."""
+    extra = max(2.0 / float(dof) - 2.0 / float(base_used), 0.0)
+    return 2.0 / (2.0 / np.asarray(base, float) + extra)
+
+
 def var1(g: np.ndarray, cap: float = A_CAP) -> np.ndarray:
     """Least-squares VAR(1) matrix of the rows of g (N×q, centred by the caller), each singular value
     raised by the AR(1) first-order bias (1 + 3σ)/N (Kendall 1954) and capped at ``cap``
@@ -157,7 +166,7 @@ def _design_terms_outputs(x: np.ndarray, s: np.ndarray, b: int | None, ny: int,
     of per-sample sums over the outputs, so it is the one-output computation on those sums: W_aᵀΣW_a is
     the Toeplitz-plus-Hankel matrix of the DCT of Σ_o var_o s², A and P the DCTs of Σ_o s Q and
     Σ_o var_o s Q. For ny = 1 and var = 1 it equals :func:`design_terms` (checked in
-    ``tests/diagnosis/test_hac.py`` against C formed from its definition). C is formed (B×B); beyond
+    ``tests/diagnosis/test_mc_calibration.py`` against C formed from its definition). C is formed (B×B); beyond
     ``OUTPUTS_MAX_B`` cosines (records of about 240 000 samples) the classic (Nny − k)/(Nny) and ν = B are
     returned instead."""
     x, s = np.asarray(x, float), np.asarray(s, float)

@@ -34,23 +34,30 @@ def test_demo_names_cubic_stiffness(demo_runs):
 
 
 def test_parameter_intervals_use_the_covariances_degrees_of_freedom(demo_runs):
-    """summary.json's param_ci95 (an extension of contract §3) is θ̂ ± t σ with Student's t at the
-    sandwich covariance's ν = identifiability.covariance_dof (floored at 1), computed here with scipy;
-    the report states the same multiplier and ν."""
+    """summary.json's param_ci95 (an extension of contract §3) is θ̂ ± t σ with Student's t at each
+    parameter's own ν = identifiability.covariance_dof_by_param (floored at 1), computed here with
+    scipy; covariance_dof is the smallest of them (the regions'); the report states the multipliers and ν."""
     from scipy import stats as sps
     s = json.loads((demo_runs[0] / "summary.json").read_text())
     html = (demo_runs[0] / "report.html").read_text(encoding="utf-8")
     for which in ("nominal", "final"):
         blk = s[which]
         nu = blk["identifiability"]["covariance_dof"]
+        own = blk["identifiability"]["covariance_dof_by_param"]
         assert nu is not None and nu > 0
-        t = sps.t.isf(0.025, max(nu, 1.0))
+        assert set(own) == set(blk["param_ci95"]) and min(own.values()) == pytest.approx(nu, rel=1e-12)
         for name, (lo, hi) in blk["param_ci95"].items():
             v, sd = blk["params"][name], blk["param_std"][name]
+            t = sps.t.isf(0.025, max(own[name], 1.0))
             assert lo == pytest.approx(v - t * sd, rel=1e-8, abs=1e-12)
             assert hi == pytest.approx(v + t * sd, rel=1e-8, abs=1e-12)
-    t_nom = sps.t.isf(0.025, max(s["nominal"]["identifiability"]["covariance_dof"], 1.0))
-    assert f"θ̂ ± {t_nom:.3g}σ" in html or f"θ̂ ± {t_nom:.3g}".rstrip("0") in html
+    ident = s["nominal"]["identifiability"]
+    t_nom = sps.t.isf(0.025, max(ident["covariance_dof"], 1.0))
+    if max(ident["covariance_dof_by_param"].values()) > 1.05 * ident["covariance_dof"]:
+        t_lo = sps.t.isf(0.025, max(ident["covariance_dof_by_param"].values()))
+        assert f"with t from {t_lo:.3g} to {t_nom:.3g}" in html
+    else:
+        assert f"θ̂ ± {t_nom:.3g}σ" in html or f"θ̂ ± {t_nom:.3g}".rstrip("0") in html
 
 
 def test_two_runs_give_byte_identical_summary(demo_runs):

@@ -17,6 +17,7 @@ from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
 from ..diagnostics.adequacy import FIR_ORDER
 from ..fit import excited_inputs, param_intervals, region_critical
+from ..hac import hotelling_critical
 from . import analysis, figures, view
 
 ZOOM = 400              # samples in the zoom window beside a long trace
@@ -121,8 +122,13 @@ def _unc_law(fit) -> dict:
     """What the ± σ, the 95 % intervals and the ellipses of one fit rest on (:func:`pipeline.fit.region_critical`)."""
     idf = fit.identifiability
     nu = None if idf is None else idf.cov_dof
+    own = list((getattr(idf, "param_dof", None) or {}).values())
+    nu_max = max(own) if own else None
     return {"nu": nu, "t": math.sqrt(region_critical(idf, 1)), "c2": region_critical(idf, 2),
-            "ci": param_intervals(fit)}
+            "ci": param_intervals(fit),
+            # each parameter's own ν (its interval's t); shown as a range when they differ by 5 % or more
+            "nu_max": nu_max if nu_max is not None and nu is not None and nu_max > 1.05 * nu else None,
+            "t_min": math.sqrt(hotelling_critical(nu_max, 1)) if nu_max is not None else None}
 
 
 def render_report(ctx) -> str:

@@ -176,7 +176,9 @@ def parameter_draws(fit, n: int, seed: int) -> tuple[np.ndarray, str] | None:
     covariance's degrees of freedom ν (``fit.identifiability.cov_dof``, floored at 1 as the intervals'
     t quantile floors it) the multivariate t, θ̂ + z·√(ν/w), z ~ N(0, P), w ~ χ²_ν (Kotz & Nadarajah 2004,
     "Multivariate t distributions", eq. 1.1), whose marginals are the t_ν of the θ̂ ± t·σ intervals
-    (:func:`pipeline.fit.param_intervals`); without ν (the classic covariance) Gauss N(θ̂, P). Gauss
+    (:func:`pipeline.fit.param_intervals`) of the parameter with the fewest degrees of freedom (one ν
+    for the whole vector: the smallest, so the band is conservative for parameters whose own ν is
+    larger); without ν (the classic covariance) Gauss N(θ̂, P). Gauss
     draws with ν = 2 put 95 % of a parameter within ±1.96σ where its interval is ±4.3σ: the band
     understated the parameters' own uncertainty. None without a finite covariance."""
     if not len(fit.theta) or not np.all(np.isfinite(fit.cov)):
