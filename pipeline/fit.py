@@ -291,15 +291,16 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.nda
 
     Why the influence direction and not each score column: on two coupled thermal nodes with a
     near-collinear triple (a1·T1 beside c·tanh(T1/s), correlated at 0.99+), the columns' κ are 0.78–0.91
-    but the weak direction the triple's variances live on has κ ≈ 0.68, so their standard deviations
-    were 1.12–1.13 times too small (400 solve_ivp noise draws, one output or both); along the influence
-    directions 1.00–1.01, the other parameters unchanged (``tests/test_trust_numbers.py``). Until the
+    but the weak direction the triple's variances live on has κ ≈ 0.67–0.68, so their standard deviations
+    were 1.08–1.11 times too small (400 solve_ivp noise draws, one output or both); along the influence
+    directions 0.97–0.98, the other two parameters 1.01–1.05 (``tests/test_trust_numbers.py``). Until the
     thirty-third session several outputs also used the classic factor and ν = B (a1, c, s covered 90.5,
     92, 92.5 %). It is formed in the same scaled coordinates, on the kept directions only:
     cov = D (V_k S_k⁻²V_kᵀ)(D Ω̂ D)(V_k S_k⁻² V_kᵀ) D / √(κκᵀ). For white residuals Ω̂ ≈ σ̂² JᵀJ and the two
-    agree; for smooth residuals the sandwich is the one that covers. The estimate's degrees of freedom ν
-    (Satterthwaite; the smallest over the parameters) are returned in ``Identifiability.cov_dof``:
-    θ̂ ± t_{ν,0.975}·std is the 95 % interval."""
+    agree; for smooth residuals the sandwich is the one that covers. The estimate's degrees of freedom
+    (Satterthwaite, with each parameter's own design ν_a) are returned per parameter in
+    ``Identifiability.param_dof`` (θ̂_a ± t_{ν_a,0.975}·std_a is its 95 % interval, :func:`param_intervals`)
+    and the smallest in ``Identifiability.cov_dof`` (regions of several parameters)."""
     p = J.shape[1]
     norms = np.linalg.norm(J, axis=0)
     d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
@@ -375,8 +376,8 @@ def param_intervals(fit: "FitResult", level: float = 0.95) -> list[tuple[float, 
 
     Why each its own ν: the smallest ν is that of the parameter whose estimate rests on the fewest
     independent stretches of the record. An estimated initial state acts through a transient at the
-    start (two tanks, both initial levels estimated: ν ≈ 3.7 for x0 against 15–20 for the rate
-    constants); with that ν for every parameter, the rate constants' intervals were 1.6 times wider than
+    start (two tanks, both initial levels estimated: ν ≈ 3 for the second level's against 7–12 for the
+    rate constants); with that ν for every parameter, the rate constants' intervals were 1.6 times wider than
     their spread needed and covered 99.3–100 % (300 solve_ivp draws); with their own, 96.7–97 %, about
     1.2 times (``tests/test_trust_numbers.py``). Regions of several parameters keep the smallest ν."""
     from .hac import hotelling_critical
