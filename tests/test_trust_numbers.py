@@ -233,19 +233,10 @@ def test_standard_errors_of_a_near_collinear_triple_match_the_monte_carlo_spread
     instead of the influence direction's, 1.08–1.11 for a1, c, s (coverage 93–94 %); before the
     thirty-third session, with two outputs (the classic (N − p)/N and ν = B), 1.19 and 90.5–92.5 %."""
     from pipeline.fit import param_intervals
-    rng = np.random.default_rng(5)
-    n, dt = 2000, 0.05
-    t = np.arange(n) * dt
-    U = np.repeat(rng.uniform(-1, 1, (n // 40 + 1, 2)), 40, axis=0)[:n]
+    from tests.records import thermal_tanh
+    t, U, X = thermal_tanh()
+    n = len(t)
     truth = {"a1": 0.8, "a2": 0.4, "b": 0.5, "c": -0.6, "s": 0.5}
-
-    def rhs(tt, x):
-        u1, u2 = U[min(int(tt / dt), n - 1)]
-        return [u1 - 0.8 * x[0] - 0.5 * (x[0] - x[1]) - 0.6 * np.tanh(2 * x[0]), u2 - 0.4 * x[1] - 0.5 * (x[1] - x[0])]
-
-    X = np.zeros((n, 2))
-    for k in range(n - 1):
-        X[k + 1] = solve_ivp(rhs, (t[k], t[k + 1]), X[k], rtol=1e-10, atol=1e-12).y[:, -1]
     model = _model({"T1": "u1 - a1*T1 - b*(T1-T2) + c*tanh(T1/s)", "T2": "u2 - a2*T2 - b*(T2-T1)"},
                    truth, list(truth), ["u1", "u2"], intersample="zoh")
     cols = [["T1", "T2"].index(o) for o in outputs]

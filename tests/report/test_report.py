@@ -493,21 +493,11 @@ def test_ellipses_of_a_near_collinear_pair_carry_a_warning(tmp_path):
     names the pairs correlated beyond ±0.99 and says that their ellipses are too narrow across (the
     Monte Carlo in BENCHMARKS: 85 % at nominal 95 %); a well-conditioned pair is not named."""
     import pandas as pd
-    from scipy.integrate import solve_ivp
 
     from pipeline.report import thin_pairs
-    rng = np.random.default_rng(5)
-    n, dt = 2000, 0.05
-    t = np.arange(n) * dt
-    U = np.repeat(rng.uniform(-1, 1, (n // 40 + 1, 2)), 40, axis=0)[:n]
-
-    def rhs(tt, x):
-        u1, u2 = U[min(int(tt / dt), n - 1)]
-        return [u1 - 0.8 * x[0] - 0.5 * (x[0] - x[1]) - 0.6 * np.tanh(2 * x[0]), u2 - 0.4 * x[1] - 0.5 * (x[1] - x[0])]
-
-    X = np.zeros((n, 2))
-    for k in range(n - 1):
-        X[k + 1] = solve_ivp(rhs, (t[k], t[k + 1]), X[k], rtol=1e-10, atol=1e-12).y[:, -1]
+    from tests.records import thermal_tanh
+    t, U, X = thermal_tanh()
+    n = len(t)
     Y = X + 0.003 * np.random.default_rng(1000).standard_normal((n, 2))
     pd.DataFrame({"t": t, "q1": U[:, 0], "q2": U[:, 1], "T1": Y[:, 0], "T2": Y[:, 1]}).to_csv(tmp_path / "thermal.csv", index=False)
     cfg = {"name": "thermal", "seed": 0,
