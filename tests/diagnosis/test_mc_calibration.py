@@ -429,6 +429,18 @@ def test_design_correction_of_several_outputs_equals_its_definition():
     np.testing.assert_allclose(one[1], ref[1], rtol=1e-10)
 
 
+def test_design_correction_of_several_outputs_beyond_its_matrix_size_is_the_classic_factor(monkeypatch):
+    """Beyond ``OUTPUTS_MAX_B`` cosines the B×B matrices are not formed: κ = (N·ny − k)/(N·ny) and
+    ν = B, the values the sandwich of several outputs used before the design terms."""
+    rng = np.random.default_rng(25)
+    n, ny, b = 160, 2, 11
+    x = _ar(rng, 0.9, (n * ny, 3), 100)
+    monkeypatch.setattr(hac, "OUTPUTS_MAX_B", b - 1)
+    kap, nu = hac.design_terms(x, x[:, :2], b, ny=ny, var=np.array([1.0, 2.0]))
+    np.testing.assert_array_equal(kap, np.full(2, (n * ny - 3) / (n * ny)))
+    np.testing.assert_array_equal(nu, np.full(2, float(b)))
+
+
 def test_trace_c2_falls_back_when_the_projection_removes_nearly_everything(monkeypatch):
     """When (Wᵀq)(Wᵀq)ᵀ nearly equals WᵀW the three-term difference cancels (1 % wrong here without the
     guard); the explicit form is used then."""
