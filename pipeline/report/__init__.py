@@ -129,30 +129,7 @@ def _unc_law(fit) -> dict:
             # each parameter's own ν (its interval's t); shown as a range when they differ by 5 % or more
             "nu_max": nu_max if nu_max is not None and nu is not None and nu_max > 1.05 * nu else None,
             "t_min": math.sqrt(hotelling_critical(nu_max, 1)) if nu_max is not None else None,
-            "thin": thin_pairs(fit)}
-
-
-THIN_CORR = 0.99   # pairs correlated beyond this get the caption's warning (:func:`thin_pairs`)
-
-
-def thin_pairs(fit) -> list[str]:
-    """"a–b" for every pair of estimated quantities whose correlation exceeds ±``THIN_CORR``. Their
-    ellipse is a thin sliver, and a linearised region cannot follow the curved law of such estimates:
-    on two thermal nodes with a near-collinear triple (a1·T1 beside c·tanh(T1/s), correlations
-    0.993–0.999; 400 solve_ivp draws) the 95 % ellipses of the pairs (a1, c) and (c, s) held the truth
-    85–86 % of the time, and even the Monte Carlo's own covariance with χ²₂ only 91–92 % (BENCHMARKS,
-    thirty-third session); the other pairs 91–97 %."""
-    cov = np.asarray(fit.cov, float)
-    names = list(getattr(fit, "names", []) or [])
-    if cov.ndim != 2 or len(names) != cov.shape[0]:
-        return []
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    out = []
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if sd[i] > 0 and sd[j] > 0 and np.isfinite(cov[i, j]) and abs(cov[i, j]) > THIN_CORR * sd[i] * sd[j]:
-                out.append(f"{names[i]}–{names[j]}")
-    return out
+            "thin": analysis.thin_pairs(fit)}
 
 
 def render_report(ctx) -> str:

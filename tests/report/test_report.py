@@ -494,7 +494,7 @@ def test_ellipses_of_a_near_collinear_pair_carry_a_warning(tmp_path):
     Monte Carlo in BENCHMARKS: 85 % at nominal 95 %); a well-conditioned pair is not named."""
     import pandas as pd
 
-    from pipeline.report import thin_pairs
+    from pipeline.report.analysis import thin_pairs
     from tests.records import thermal_tanh
     t, U, X = thermal_tanh()
     n = len(t)
