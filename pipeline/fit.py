@@ -343,9 +343,10 @@ def scaled_covariance(J: np.ndarray, s2: float, names: list[str], scores: np.nda
     for i in sorted(bad):
         cov[i, :] = np.nan
         cov[:, i] = np.nan
+    unident = [names[i] for i in sorted(bad)]
     if param_dof is not None:
-        param_dof = {k: v for k, v in param_dof.items() if k not in {names[i] for i in bad}}
-    return cov, Identifiability(int(keep.sum()), p, cond, dirs, [names[i] for i in sorted(bad)], cov_dof, param_dof)
+        param_dof = {k: v for k, v in param_dof.items() if k not in unident}
+    return cov, Identifiability(int(keep.sum()), p, cond, dirs, unident, cov_dof, param_dof)
 
 
 def region_critical(idf: Identifiability | None, q: int, level: float = 0.95) -> float:

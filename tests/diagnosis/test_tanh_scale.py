@@ -1,6 +1,6 @@
 """A saturating static law tanh(z/s) is named with its own knee, not as a sum of other families' terms.
 
-The record is made here with scipy's ``solve_ivp`` (code the detector does not share): two coupled
+The record is made with scipy's ``solve_ivp`` (code the detector does not share; ``tests/records.py``): two coupled
 thermal nodes, each driven by its own held input, and the node T1 losing heat through an extra
 saturating path −0.6·tanh(2·T1) (knee s = 0.5; the state's spread on the record is about 0.27). The
 nominal model is linear. A hostile user's probe found that with the scale held at the state's spread
@@ -17,29 +17,16 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from scipy.integrate import solve_ivp
 
 from pipeline.config import load_config
 from pipeline.runs import analyse
+from tests.records import thermal_tanh
 
 DT, N = 0.05, 2000
 
 
 def _record(path) -> None:
-    rng = np.random.default_rng(5)
-    U = np.repeat(rng.uniform(-1, 1, (N // 40 + 1, 2)), 40, axis=0)[:N]
-
-    def rhs(tt, s):
-        u1, u2 = U[min(int(tt / DT), N - 1)]
-        T1, T2 = s
-        return [u1 - 0.8 * T1 - 0.5 * (T1 - T2) - 0.6 * np.tanh(2 * T1), u2 - 0.4 * T2 - 0.5 * (T2 - T1)]
-
-    t = np.arange(N) * DT
-    # held inputs: integrate sample interval by sample interval so no step straddles a switch
-    X = np.zeros((N, 2))
-    for k in range(N - 1):
-        X[k + 1] = solve_ivp(rhs, (t[k], t[k + 1]), X[k], rtol=1e-10, atol=1e-12).y[:, -1]
-    X += 0.003 * rng.standard_normal((N, 2))
+    t, U, X = thermal_tanh(N, DT, noise=0.003)
     pd.DataFrame({"t": t, "q1": U[:, 0], "q2": U[:, 1], "T1": X[:, 0], "T2": X[:, 1]}).to_csv(path, index=False)
 
 
