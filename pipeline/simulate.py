@@ -74,6 +74,57 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
     return -1
 
 
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+def rhs1({rhs1_args}, t, p):
+{assign1}
+    return {rhs1_ret}
+
+
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+def simulate1(U, T, nsub, foh, p, x0, limits, bound, X):
+    n = U.shape[0]
+    nl = limits.shape[0]
+    xa = np.empty(x0.shape[0])
+{lean_init}
+    for k in range(n):
+{lean_store}
+        if k == n - 1:
+            break
+{lean_du}
+        h = (T[k + 1] - T[k]) / nsub
+        for s in range(nsub):
+            ta = T[k] + (s + 0.0) * h
+            tm = T[k] + (s + 0.5) * h
+            tb = T[k] + (s + 1.0) * h
+            fa = (s + 0.0) / nsub
+            fm = (s + 0.5) / nsub
+            fb = (s + 1.0) / nsub
+{lean_u}
+            {k1} = rhs1({a1}, ta, p)
+            {k2} = rhs1({a2}, tm, p)
+            {k3} = rhs1({a3}, tm, p)
+            {k4} = rhs1({a4}, tb, p)
+{lean_step}
+            if nl > 0:
+{s1_xa_in}
+                for j in range(nl):
+                    i = limits[j, 0]
+                    r = limits[j, 3]
+                    if limits[j, 1] >= 0 and xa[i] < p[limits[j, 1]]:
+                        xa[i] = p[limits[j, 1]]
+                        if r >= 0 and xa[r] < 0.0:
+                            xa[r] = 0.0
+                    if limits[j, 2] >= 0 and xa[i] > p[limits[j, 2]]:
+                        xa[i] = p[limits[j, 2]]
+                        if r >= 0 and xa[r] > 0.0:
+                            xa[r] = 0.0
+{s1_xa_out}
+        if {lean_bad}:
+{lean_store1}
+            return k + 1
+    return -1
+
+
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def simulate(U, T, nsub, foh, p, x0, code, consts, progs, limits, bound, X):
     n = U.shape[0]
@@ -255,6 +306,7 @@ class Programs:
     #                        the slot holding the program's value
     limits: np.ndarray     # (n, 4): state, lo param index or -1, hi param index or -1, rate state or -1
     size: int = 0          # len(V)
+    beyond_terms: bool = False   # compiled rewrites or extra states (:attr:`KernelParts.beyond_terms`)
 
 
 def _emit(tree: ast.expr, resolve, code: list, consts: list) -> int:
@@ -327,11 +379,22 @@ def programs(model: Model) -> Programs:
         res = _emit(tree, resolve, code, consts)
         rows.append([kind, target, a, len(code), res])
 
-    for rw in model.param_rewrites:
-        add(0, pidx[rw.target], model.expr(rw.text).tree, resolver(False, True))
-    for rw in model.input_rewrites:
-        add(1, uidx[rw.target], model.expr(rw.text).tree, resolver(True, False))
-    compiled = list(_kernel_terms(model))
+    kp = _kernel_parts(model)
+    done = {rw.target for rw in kp.param_rewrites + kp.input_rewrites}
+    for kind, rws, idx, compiled_rws in ((0, model.param_rewrites, pidx, kp.param_rewrites),
+                                         (1, model.input_rewrites, uidx, kp.input_rewrites)):
+        compiled_rws = list(compiled_rws)
+        for rw in rws:
+            if rw in compiled_rws:  # in the kernel's own source
+                compiled_rws.remove(rw)
+                continue
+            if rw.target in done:
+                # the kernel writes its compiled rewrites after the interpreted ones: a second rewrite
+                # of the same name would be overwritten instead of overwriting (the families never
+                # rewrite a name twice: they skip a rewritten input or parameter)
+                raise ValueError(f"programs: {rw.target!r} is rewritten again after a compiled rewrite")
+            add(kind, idx[rw.target], model.expr(rw.text).tree, resolver(kind == 1, kind == 0))
+    compiled = list(kp.terms)
     for term in model.terms:
         if term.is_output:
             continue
@@ -341,7 +404,8 @@ def programs(model: Model) -> Programs:
         tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
         add(2, sidx[term.target], tree, resolver(False, False))
     for s in model.extra_states:
-        add(3, sidx[s], model.equations[s].tree, resolver(True, False))   # an actuator state sees the raw input
+        if s not in kp.states:
+            add(3, sidx[s], model.equations[s].tree, resolver(True, False))   # an actuator state sees the raw input
     lim = [(sidx[L_.state], pidx[L_.lo] if L_.lo else -1, pidx[L_.hi] if L_.hi else -1,
             sidx[L_.rate] if L_.rate else -1) for L_ in model.limits]
     consts.append(0.0)                     # never empty
@@ -362,7 +426,7 @@ def programs(model: Model) -> Programs:
         r[4] = place(r[4])
     return Programs(np.array(code, np.int64).reshape(-1, 4), np.array(consts, float),
                     np.array(rows, np.int64).reshape(-1, 5), np.array(lim, np.int64).reshape(-1, 4),
-                    tmp + len(code))
+                    tmp + len(code), kp.beyond_terms)
 
 
 def _kernel_terms(model: Model) -> list:
@@ -375,6 +439,34 @@ def _kernel_terms(model: Model) -> list:
             want.remove(term)
             out.append(term)
     return out
+
+
+@dataclass(frozen=True)
+class KernelParts:
+    """The extensions written into a model's own kernel source (:meth:`pipeline.model.Model.compiled`),
+    each in the model's own order; everything else is interpreted from :func:`programs`."""
+
+    terms: list
+    param_rewrites: list
+    input_rewrites: list
+    states: list
+
+    @property
+    def beyond_terms(self) -> bool:
+        """Compiled rewrites or extra states: such a model runs the generic kernel (whose stage time
+        and input are the interpreter's to the last bit), never the lean one."""
+        return bool(self.param_rewrites or self.input_rewrites or self.states)
+
+
+def _kernel_parts(model: Model) -> KernelParts:
+    want = list(model.kernel_rewrites)
+    pr, ir = [], []
+    for rws, out in ((model.param_rewrites, pr), (model.input_rewrites, ir)):
+        for rw in rws:
+            if rw in want:
+                want.remove(rw)
+                out.append(rw)
+    return KernelParts(_kernel_terms(model), pr, ir, [s for s in model.extra_states if s in model.kernel_states])
 
 
 def _cache_dir() -> Path:
@@ -412,10 +504,30 @@ def kernel_source(model: Model) -> str:
     for i, p in enumerate(model.nominal_params):
         names[p] = f"pe[{i}]"
     names["t"] = "t"
+    kp = _kernel_parts(model)
+    pidx = {p: i for i, p in enumerate(model.param_names)}
+    uidx = {u: i for i, u in enumerate(model.inputs)}
+    sidx = {s: i for i, s in enumerate(model.states)}
+    rw_tree = lambda rw: model.expr(rw.text).tree
+    # compiled rewrites (:class:`KernelParts`) give the effective parameters q_i and inputs w_i, in
+    # the interpreter's order and from the same operands: a parameter's rewrite reads the raw
+    # parameters and inputs, an input's the raw inputs and effective parameters, the nominal equations
+    # and the terms the effective ones, an extra state's equation the raw inputs and effective parameters
+    lean_raw = {**{s: xs[i] for i, s in enumerate(model.states)}, **{u: ue[i] for i, u in enumerate(model.inputs)},
+                **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}, "t": "t"}
+    lean_q = {rw.target: f"q_{pidx[rw.target]}" for rw in kp.param_rewrites}
+    lean_w = {rw.target: f"w_{uidx[rw.target]}" for rw in kp.input_rewrites}
+    assign = [f"    q_{pidx[rw.target]} = {to_source(rw_tree(rw), lean_raw, scalar=True)}" for rw in kp.param_rewrites]
+    assign += [f"    w_{uidx[rw.target]} = {to_source(rw_tree(rw), {**lean_raw, **lean_q}, scalar=True)}"
+               for rw in kp.input_rewrites]
+    names = {**names, **lean_q, **lean_w}
     rhs = [to_source(model.equations[s], names, scalar=True) for s in model.nominal_states]
-    assign = [f"    d{i} = {r}" for i, r in enumerate(rhs)]
-    # an extra state's equation is a program, so a model with one never runs the lean kernel
-    assign += [f"    d{i} = 0.0" for i in range(len(rhs), nx)]
+    assign += [f"    d{i} = {r}" for i, r in enumerate(rhs)]
+    # an extra state's equation is a program unless compiled: a model with one never runs the lean
+    # kernel (:attr:`KernelParts.beyond_terms`), whose source is still the same model's
+    assign += [f"    d{i} = " + (to_source(model.equations[s], {**lean_raw, **lean_q}, scalar=True)
+                                 if s in kp.states else "0.0")
+               for i, s in enumerate(model.states) if i >= len(rhs)]
     # the generic kernel keeps the state, the stage state and the input in scalar locals too (xs_i, a_i,
     # u_i) and evaluates the nominal right-hand side on them when the model has no program; with programs
     # it copies the stage into the value vector V the register code reads (:func:`layout`) and evaluates
@@ -426,22 +538,40 @@ def kernel_source(model: Model) -> str:
     gnames = {**{u: f"V[{L['ue'] + i}]" for i, u in enumerate(model.inputs)},
               **{p: f"V[{L['pe'] + i}]" for i, p in enumerate(model.param_names)}, "t": "t",
               **{s: f"V[{L['x'] + i}]" for i, s in enumerate(model.states)}}
-    fast = {**{u: f"u_{i}" for i, u in enumerate(model.inputs)},
-            **{p: f"p[{i}]" for i, p in enumerate(model.param_names)}, "t": "t",
-            **{s: f"a_{i}" for i, s in enumerate(model.states)}}
+    fast_raw = {**{u: f"u_{i}" for i, u in enumerate(model.inputs)},
+                **{p: f"p[{i}]" for i, p in enumerate(model.param_names)}, "t": "t",
+                **{s: f"a_{i}" for i, s in enumerate(model.states)}}
+    fast_q = {rw.target: f"q_{pidx[rw.target]}" for rw in kp.param_rewrites}
+    fast = {**fast_raw, **fast_q, **{rw.target: f"w_{uidx[rw.target]}" for rw in kp.input_rewrites}}
     generic = [(i, "=", model.equations[s].tree) for i, s in enumerate(model.nominal_states)]
     # compiled extension terms (Model.kernel_terms): c * expr added after the nominal right-hand side,
     # in the order the interpreter would add them; every state, effective input and parameter by index
     full = {**{s: xs[i] for i, s in enumerate(model.states)}, **names,
-            **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}}
-    for term in _kernel_terms(model):
+            **{p: f"pe[{i}]" for i, p in enumerate(model.param_names) if p not in lean_q}}
+    for term in kp.terms:
         i = model.nominal_states.index(term.target)
         tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
         assign.append(f"    d{i} += {to_source(tree, full, scalar=True)}")
         generic.append((i, "+=", tree))
-    g_fast = [f"{' ' * 20}d_{i} {op} {to_source(tree, fast, scalar=True)}" for i, op, tree in generic]
-    g_fast += [f"{' ' * 20}d_{i} = 0.0" for i in range(len(model.nominal_states), nx)]
-    g_assign = [f"{' ' * 28}dx[{i}] {op} {to_source(tree, gnames, scalar=True)}" for i, op, tree in generic]
+    g_fast = [f"{' ' * 20}q_{pidx[rw.target]} = {to_source(rw_tree(rw), fast_raw, scalar=True)}"
+              for rw in kp.param_rewrites]
+    g_fast += [f"{' ' * 20}w_{uidx[rw.target]} = {to_source(rw_tree(rw), {**fast_raw, **fast_q}, scalar=True)}"
+               for rw in kp.input_rewrites]
+    g_fast += [f"{' ' * 20}d_{i} {op} {to_source(tree, fast, scalar=True)}" for i, op, tree in generic]
+    g_fast += [f"{' ' * 20}d_{i} = " + (to_source(model.equations[s], {**fast_raw, **fast_q}, scalar=True)
+                                       if s in kp.states else "0.0")
+               for i, s in enumerate(model.states) if i >= len(model.nominal_states)]
+    # with programs: the compiled parameter rewrites go into V before the interpreted ones run (both
+    # read raw values only), the compiled input rewrites after every parameter rewrite and before the
+    # nominal equations, the compiled extra states after every program (the interpreter's last kind)
+    v_pe = {p: f"V[{L['pe'] + i}]" for i, p in enumerate(model.param_names)}
+    g_pre = [f"{' ' * 20}V[{L['pe'] + pidx[rw.target]}] = {to_source(rw_tree(rw), fast_raw, scalar=True)}"
+             for rw in kp.param_rewrites]
+    g_assign = [f"{' ' * 28}V[{L['ue'] + uidx[rw.target]}] = {to_source(rw_tree(rw), {**fast_raw, **v_pe}, scalar=True)}"
+                for rw in kp.input_rewrites]
+    g_assign += [f"{' ' * 28}dx[{i}] {op} {to_source(tree, gnames, scalar=True)}" for i, op, tree in generic]
+    g_post = [f"{' ' * 20}dx[{sidx[s]}] = {to_source(model.equations[s], {**fast_raw, **v_pe}, scalar=True)}"
+              for s in kp.states]
     rows = lambda ind, fmt: "\n".join(" " * ind + fmt.format(i=i) for i in range(nx))
     g_fields = dict(
         g_init="\n".join([f"    xs_{i} = x0[{i}]" for i in range(nx)] + [f"    du_{i} = 0.0" for i in range(nu)]
@@ -455,16 +585,25 @@ def kernel_source(model: Model) -> str:
         g_fast="\n".join(g_fast),
         g_arrays="\n".join([f"{' ' * 20}V[{L['x'] + i}] = a_{i}" for i in range(nx)]
                            + [f"{' ' * 20}V[{L['ui'] + i}] = u_{i}\n{' ' * 20}V[{L['ue'] + i}] = u_{i}"
-                              for i in range(nu)] + [f"{' ' * 20}V[{L['t']}] = t"]),
+                              for i in range(nu)] + [f"{' ' * 20}V[{L['t']}] = t"] + g_pre),
         g_pe=str(L["pe"]), g_ue=str(L["ue"]),
         assign_generic="\n".join(g_assign),
-        g_read=rows(20, "d_{i} = dx[{i}]"),
+        g_read="\n".join(g_post + [rows(20, "d_{i} = dx[{i}]")]),
         **{f"g_k{j}": rows(20, f"k{j}_{{i}} = d_{{i}}") for j in (1, 2, 3, 4)},
         g_step=rows(12, "xs_{i} += h / 6.0 * (k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i})"),
         g_xa_in=rows(16, "xa[{i}] = xs_{i}"), g_xa_out=rows(16, "xs_{i} = xa[{i}]"),
         g_store1=rows(12, "X[k + 1, {i}] = xs_{i}"),
         g_bad=" or ".join(f"not (abs(xs_{i}) <= bound)" for i in range(nx)))
     tup = lambda v: ", ".join(v) + ("," if len(v) == 1 else "")
+    # the compiled kernel without programs (simulate1): the generic kernel's no-program path unrolled
+    # like the lean one, with the generic kernel's stage times T[k] + (s + c)·h and inputs, so the same
+    # numbers to the last bit as the generic kernel (and the interpreter) give; limits applied after
+    # each sub-step as there
+    g1 = [ln[16:] for ln in g_fast]
+    g1_fields = dict(
+        rhs1_args=", ".join([f"a_{i}" for i in range(nx)] + [f"u_{i}" for i in range(nu)]),
+        assign1="\n".join(g1), rhs1_ret=tup([f"d_{i}" for i in range(nx)]),
+        s1_xa_in=rows(16, "xa[{i}] = xs_{i}"), s1_xa_out=rows(16, "xs_{i} = xa[{i}]"))
     ks = {j: [f"k{j}_{i}" for i in range(nx)] for j in (1, 2, 3, 4)}
     stage_args = {1: xs, 2: [f"xs_{i} + 0.5 * h * k1_{i}" for i in range(nx)],
                   3: [f"xs_{i} + 0.5 * h * k2_{i}" for i in range(nx)],
@@ -485,7 +624,7 @@ def kernel_source(model: Model) -> str:
         **{f"k{j}": tup(ks[j]) for j in (1, 2, 3, 4)},
         **{f"a{j}": ", ".join(stage_args[j] + [f"{stage_u[j]}_{i}" for i in range(nu)]) for j in (1, 2, 3, 4)})
     return _TEMPLATE.format(states=", ".join(model.nominal_states), assign="\n".join(assign), **g_fields,
-                            **fields)
+                            **g1_fields, **fields)
 
 
 _LOADED: dict[str, object] = {}
@@ -500,7 +639,9 @@ def _structure_key(model: Model) -> tuple:
     nominal equations (the Expr objects themselves: a frozen dataclass holding its tree, so two keys are
     equal only for the same parsed equations) and the terms."""
     return (model.states, model.nominal_states, model.inputs, model.nominal_params, tuple(model.params),
-            tuple(model.equations[s] for s in model.nominal_states), model.terms, model.kernel_terms)
+            tuple(model.equations[s] for s in model.nominal_states), model.terms, model.kernel_terms,
+            model.kernel_rewrites, model.kernel_states,
+            tuple(model.equations[s] for s in model.kernel_states))
 
 
 def get_kernel(model: Model):
@@ -542,7 +683,7 @@ def _load_kernel(key: str, src: str):
     mod = importlib.util.module_from_spec(spec)
     sys.modules[modname] = mod
     spec.loader.exec_module(mod)
-    return mod.simulate, mod.simulate0
+    return mod.simulate, mod.simulate0, mod.simulate1
 
 
 @dataclass
@@ -601,7 +742,8 @@ _PROGRAMS: dict = {}
 def _programs_cached(model: Model) -> Programs:
     """Programs depend on the structure only (names and expressions), not on parameter values."""
     key = (model.states, model.inputs, tuple(model.params), model.terms, model.kernel_terms, model.input_rewrites,
-           model.param_rewrites, model.limits, tuple(model.equations[s].text for s in model.extra_states))
+           model.param_rewrites, model.limits, tuple(model.equations[s].text for s in model.extra_states),
+           model.kernel_rewrites, model.kernel_states)
     if key not in _PROGRAMS:
         if len(_PROGRAMS) > 4096:
             _PROGRAMS.clear()
@@ -694,9 +836,11 @@ def simulate_states(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarray, 
     X = np.empty((n, nx))
     if n == 0:
         return SimResult(X, None)
-    generic, lean = kern
-    if len(pr.progs) == 0 and len(pr.limits) == 0:   # the nominal structure alone: the lean kernel
+    generic, lean, compiled = kern
+    if len(pr.progs) == 0 and len(pr.limits) == 0 and not pr.beyond_terms:   # nominal + compiled terms: lean
         status = lean(U, t, int(model.substeps), model.intersample != "zoh", p, x0, float(bound), X)
+    elif len(pr.progs) == 0:      # nothing interpreted: the generic kernel's arithmetic, unrolled
+        status = compiled(U, t, int(model.substeps), model.intersample != "zoh", p, x0, pr.limits, float(bound), X)
     else:
         status = generic(U, t, int(model.substeps), model.intersample != "zoh", p, x0, pr.code, pr.consts,
                          pr.progs, pr.limits, float(bound), X)
