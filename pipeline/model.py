@@ -13,8 +13,10 @@ An extension is one of (all written as checked expressions of :mod:`pipeline.exp
 * a state limit (the state is clamped to [lo, hi] after every integration step: overflow, end stop).
 
 The nominal right-hand side is compiled once per structure; extensions are evaluated inside the same
-kernel by a small stack machine (see :mod:`pipeline.simulate`), so testing and refitting a hypothesis
-never recompiles. The input delay acts on the sampled input before the kernel.
+kernel by a small stack machine (see :mod:`pipeline.simulate`), so testing a hypothesis never
+recompiles; on a long record an accepted model's and a refit's extensions are compiled into their own
+kernel (:meth:`Model.compiled`), with the same numbers. The input delay acts on the sampled input
+before the kernel.
 """
 
 from __future__ import annotations

@@ -10,9 +10,13 @@ folder and compiled by numba with ``cache=True`` and ``nogil=True`` (candidate r
 division): one compile per model *structure* and machine, reused
 across processes. Extensions are register code (:func:`programs`: each operation reads slots of a
 value vector holding the stage state, inputs, t, parameters and constants, and writes one slot of its
-own) interpreted inside the same kernel, so refitting a candidate extension never recompiles; the terms
-of an accepted model (``Model.compiled``) are written into its own kernel's source instead, since the
-first interpreted term costs more than the nominal right-hand side.
+own) interpreted inside the same kernel, so testing a candidate extension never recompiles; the
+extensions of an accepted model and of a refit on a long record (``Model.compiled``: terms, rewrites,
+extra states) are written into its own kernel's source instead, since the first interpreted term costs
+more than the nominal right-hand side. Three kernels per structure: ``simulate0`` (lean: the nominal
+model and compiled terms), ``simulate1`` (nothing interpreted, but compiled rewrites, extra states or
+state limits; the generic kernel's stage times) and ``simulate`` (generic, with the interpreter); the
+compiled and interpreted forms of an extension give the same numbers to the last bit.
 Divergence (non-finite or beyond ``bound``) stops the loop and is reported with its sample index; a
 fixed-step loop cannot hang.
 """
@@ -453,8 +457,9 @@ class KernelParts:
 
     @property
     def beyond_terms(self) -> bool:
-        """Compiled rewrites or extra states: such a model runs the generic kernel (whose stage time
-        and input are the interpreter's to the last bit), never the lean one."""
+        """Compiled rewrites or extra states: such a model runs ``simulate1`` (or the generic kernel when
+        something is still interpreted), whose stage times and inputs are the interpreter's to the last
+        bit, never the lean kernel, whose stage times are summed differently."""
         return bool(self.param_rewrites or self.input_rewrites or self.states)
 
 
