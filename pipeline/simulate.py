@@ -61,9 +61,9 @@ from numba import njit
 
 
 @njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
-def rhs0({rhs_args}, t, pe):
-{assign}
-    return {rhs_ret}
+def rhs1({rhs1_args}, t, p):
+{assign1}
+    return {rhs1_ret}
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -82,21 +82,15 @@ def simulate0(U, T, nsub, foh, p, x0, bound, X):
             fm = (s + 0.5) / nsub
             fb = (s + 1.0) / nsub
 {lean_u}
-            {k1} = rhs0({a1}, t, p)
-            {k2} = rhs0({a2}, t + 0.5 * h, p)
-            {k3} = rhs0({a3}, t + 0.5 * h, p)
-            {k4} = rhs0({a4}, t + h, p)
+            {k1} = rhs1({a1}, t, p)
+            {k2} = rhs1({a2}, t + 0.5 * h, p)
+            {k3} = rhs1({a3}, t + 0.5 * h, p)
+            {k4} = rhs1({a4}, t + h, p)
 {lean_step}
         if {lean_bad}:
 {lean_store1}
             return k + 1
     return -1
-
-
-@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
-def rhs1({rhs1_args}, t, p):
-{assign1}
-    return {rhs1_ret}
 
 
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -490,20 +484,11 @@ def _cache_dir() -> Path:
 
 def kernel_source(model: Model) -> str:
     nx, nu = len(model.states), len(model.inputs)
-    # the lean kernel keeps the state and the input in scalar locals (xs_0, ue_0, ...), unrolled over the
+    # the lean kernel keeps the state and the input in scalar locals (xs_0, ua_0, ...), unrolled over the
     # model's own sizes: LLVM holds them in registers, and the loops over arrays of run-time length cost
     # half its time (92 000 samples x 2 sub-steps: 6.8 ms -> 3.2 ms, the same floating-point operations
     # in the same order, so the same numbers bit for bit)
     xs = [f"xs_{i}" for i in range(nx)]
-    ue = [f"ue_{i}" for i in range(nu)]
-    names = {}
-    for i, s in enumerate(model.nominal_states):
-        names[s] = xs[i]
-    for i, u in enumerate(model.inputs):
-        names[u] = ue[i]
-    for i, p in enumerate(model.nominal_params):
-        names[p] = f"pe[{i}]"
-    names["t"] = "t"
     kp = _kernel_parts(model)
     pidx = {p: i for i, p in enumerate(model.param_names)}
     uidx = {u: i for i, u in enumerate(model.inputs)}
@@ -513,21 +498,6 @@ def kernel_source(model: Model) -> str:
     # the interpreter's order and from the same operands: a parameter's rewrite reads the raw
     # parameters and inputs, an input's the raw inputs and effective parameters, the nominal equations
     # and the terms the effective ones, an extra state's equation the raw inputs and effective parameters
-    lean_raw = {**{s: xs[i] for i, s in enumerate(model.states)}, **{u: ue[i] for i, u in enumerate(model.inputs)},
-                **{p: f"pe[{i}]" for i, p in enumerate(model.param_names)}, "t": "t"}
-    lean_q = {rw.target: f"q_{pidx[rw.target]}" for rw in kp.param_rewrites}
-    lean_w = {rw.target: f"w_{uidx[rw.target]}" for rw in kp.input_rewrites}
-    assign = [f"    q_{pidx[rw.target]} = {to_source(rw_tree(rw), lean_raw, scalar=True)}" for rw in kp.param_rewrites]
-    assign += [f"    w_{uidx[rw.target]} = {to_source(rw_tree(rw), {**lean_raw, **lean_q}, scalar=True)}"
-               for rw in kp.input_rewrites]
-    names = {**names, **lean_q, **lean_w}
-    rhs = [to_source(model.equations[s], names, scalar=True) for s in model.nominal_states]
-    assign += [f"    d{i} = {r}" for i, r in enumerate(rhs)]
-    # an extra state's equation is a program unless compiled: a model with one never runs the lean
-    # kernel (:attr:`KernelParts.beyond_terms`), whose source is still the same model's
-    assign += [f"    d{i} = " + (to_source(model.equations[s], {**lean_raw, **lean_q}, scalar=True)
-                                 if s in kp.states else "0.0")
-               for i, s in enumerate(model.states) if i >= len(rhs)]
     # the generic kernel keeps the state, the stage state and the input in scalar locals too (xs_i, a_i,
     # u_i) and evaluates the nominal right-hand side on them when the model has no program; with programs
     # it copies the stage into the value vector V the register code reads (:func:`layout`) and evaluates
@@ -546,13 +516,9 @@ def kernel_source(model: Model) -> str:
     generic = [(i, "=", model.equations[s].tree) for i, s in enumerate(model.nominal_states)]
     # compiled extension terms (Model.kernel_terms): c * expr added after the nominal right-hand side,
     # in the order the interpreter would add them; every state, effective input and parameter by index
-    full = {**{s: xs[i] for i, s in enumerate(model.states)}, **names,
-            **{p: f"pe[{i}]" for i, p in enumerate(model.param_names) if p not in lean_q}}
     for term in kp.terms:
         i = model.nominal_states.index(term.target)
-        tree = ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)
-        assign.append(f"    d{i} += {to_source(tree, full, scalar=True)}")
-        generic.append((i, "+=", tree))
+        generic.append((i, "+=", ast.BinOp(ast.Name(term.coef), ast.Mult(), model.term_expr(term).tree)))
     g_fast = [f"{' ' * 20}q_{pidx[rw.target]} = {to_source(rw_tree(rw), fast_raw, scalar=True)}"
               for rw in kp.param_rewrites]
     g_fast += [f"{' ' * 20}w_{uidx[rw.target]} = {to_source(rw_tree(rw), {**fast_raw, **fast_q}, scalar=True)}"
@@ -595,10 +561,11 @@ def kernel_source(model: Model) -> str:
         g_store1=rows(12, "X[k + 1, {i}] = xs_{i}"),
         g_bad=" or ".join(f"not (abs(xs_{i}) <= bound)" for i in range(nx)))
     tup = lambda v: ", ".join(v) + ("," if len(v) == 1 else "")
-    # the compiled kernel without programs (simulate1): the generic kernel's no-program path unrolled
-    # like the lean one, with the generic kernel's stage times T[k] + (s + c)·h and inputs, so the same
-    # numbers to the last bit as the generic kernel (and the interpreter) give; limits applied after
-    # each sub-step as there
+    # rhs1, the right-hand side of both unrolled kernels, is the generic kernel's no-program path on
+    # scalar arguments. simulate1 (nothing interpreted) has the generic kernel's stage times
+    # T[k] + (s + c)·h and inputs, so the same numbers to the last bit as the generic kernel (and the
+    # interpreter) give, and applies limits after each sub-step as there; the lean simulate0 sums its
+    # stage times as T[k] + s·h + c·h and runs only models with nothing beyond compiled terms
     g1 = [ln[16:] for ln in g_fast]
     g1_fields = dict(
         rhs1_args=", ".join([f"a_{i}" for i in range(nx)] + [f"u_{i}" for i in range(nu)]),
@@ -611,7 +578,6 @@ def kernel_source(model: Model) -> str:
     stage_u = {1: "ua", 2: "um", 3: "um", 4: "ub"}
     ind = " " * 12
     fields = dict(
-        rhs_args=", ".join(xs + ue), rhs_ret=tup([f"d{i}" for i in range(nx)]),
         lean_init="\n".join([f"    xs_{i} = x0[{i}]" for i in range(nx)] + [f"    du_{i} = 0.0" for i in range(nu)]),
         lean_store="\n".join(f"        X[k, {i}] = xs_{i}" for i in range(nx)),
         lean_store1="\n".join(f"            X[k + 1, {i}] = xs_{i}" for i in range(nx)),
@@ -623,7 +589,7 @@ def kernel_source(model: Model) -> str:
         lean_bad=" or ".join(f"not (abs(xs_{i}) <= bound)" for i in range(nx)),
         **{f"k{j}": tup(ks[j]) for j in (1, 2, 3, 4)},
         **{f"a{j}": ", ".join(stage_args[j] + [f"{stage_u[j]}_{i}" for i in range(nu)]) for j in (1, 2, 3, 4)})
-    return _TEMPLATE.format(clamp=_CLAMP, states=", ".join(model.nominal_states), assign="\n".join(assign), **g_fields,
+    return _TEMPLATE.format(clamp=_CLAMP, states=", ".join(model.nominal_states), **g_fields,
                             **g1_fields, **fields)
 
 
