@@ -192,16 +192,30 @@ def test_sup_lr_break_p_matches_andrews_table_and_a_brownian_bridge():
 
 
 def test_ar_prediction_error_filter_matches_scipy_lfilter():
-    """v_t = x_t − Σ a_i x_{t−i} (the GLS prewhitening of the added-terms test), computed block by block,
-    equals scipy's FIR filter [1, −a_1, …, −a_p] from sample p on, for one and several columns, records
-    whose length is not a multiple of the block, and no lag at all."""
+    """v_t = x_t − Σ a_i x_{t−i} (the GLS prewhitening of the added-terms test), computed by the compiled
+    kernel four samples at a time, equals scipy's FIR filter [1, −a_1, …, −a_p] from sample p on, for one
+    and several columns, lengths that are not a multiple of 4, a record shorter than p and no lag at all;
+    and it is, to the last bit, the whole-array numpy loop over the lags in the order i = 1..p (the
+    arithmetic the added-term tests' p-values were calibrated with), also for a Fortran-ordered and a
+    strided input."""
     from scipy.signal import lfilter
     from pipeline.diagnostics.stats import _ar_filter
     rng = np.random.default_rng(3)
-    for shape, p, rows in (((10_001,), 3, 4096), ((9_000, 4), 10, 4096), ((257, 2), 2, 16), ((50, 3), 0, 4096)):
+    for shape, p in (((10_001,), 3), ((9_000, 4), 10), ((257, 2), 2), ((50, 3), 0), ((13, 2), 10), ((7,), 10)):
         x = rng.standard_normal(shape).cumsum(axis=0)
         a = rng.uniform(-0.4, 0.4, p)
         ref = lfilter(np.concatenate([[1.0], -a]), [1.0], x, axis=0)[p:]
-        got = _ar_filter(x, a, rows=rows)
+        got = _ar_filter(x, a)
         assert got.shape == ref.shape
         np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(x).max())
+        loop = x[p:].copy()
+        for i in range(p if len(x) > p else 0):
+            loop -= a[i] * x[p - 1 - i:len(x) - 1 - i]
+        assert np.array_equal(got, loop)
+    x = rng.standard_normal((3001, 6))
+    a = rng.uniform(-0.4, 0.4, 7)
+    for view in (np.asfortranarray(x), x[:, ::2], x[::-1]):
+        loop = view[7:].copy()
+        for i in range(7):
+            loop -= a[i] * view[6 - i:len(view) - 1 - i]
+        assert np.array_equal(_ar_filter(view, a), loop)

@@ -15,6 +15,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numba import njit
 from scipy import stats
 from scipy.fft import next_fast_len
 from scipy.special import gammaln
@@ -501,22 +502,52 @@ GLS = True
 GLS_PMAX = 10
 
 
-def _ar_filter(x: np.ndarray, a: np.ndarray, rows: int = 4096) -> np.ndarray:
+def _ar_filter(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     """v_t = x_t − Σ_i a_i x_{t−i}, t = p..N−1, column by column (the AR(p) prediction error filter).
 
-    Each v_t is x_t minus the lag terms in the order i = 1..p, as a whole-array loop over the lags
-    would do it, but ``rows`` at a time with one reused buffer, so a block stays in cache across its
-    p lags (92 422 × 9 and p = 10: 12.0 → 5.0 ms, bit-identical)."""
+    Each v_t is x_t minus the lag terms in the order i = 1..p, the arithmetic of a whole-array numpy
+    loop over the lags (``x[p:] − a_1 x[p−1:−1] − …``), so the values are the same to the last bit
+    (``tests/diagnosis/test_stats.py``). A compiled loop (:func:`_ar_filter_kernel`), four samples at a
+    time: Silverbox's added-term tests filter about 90 000 × 6 values with p = 10, 6.1 ms in numpy
+    (blocked to stay in cache), 2.4 ms compiled, one thread; the kernel releases the GIL."""
     x = np.asarray(x, float)
-    p = len(a)
-    out = x[p:].copy()
-    buf = np.empty((min(rows, len(out)),) + x.shape[1:])
-    for r0 in range(0, len(out), rows):
-        r1 = min(r0 + rows, len(out))
-        o, b = out[r0:r1], buf[:r1 - r0]
-        for i in range(p):
-            np.multiply(a[i], x[p - 1 - i + r0:p - 1 - i + r1], out=b)
-            o -= b
+    a = np.ascontiguousarray(a, dtype=float)
+    if x.ndim == 1:
+        return _ar_filter_kernel(np.ascontiguousarray(x)[:, None], a)[:, 0]
+    return _ar_filter_kernel(np.ascontiguousarray(x), a)
+
+
+@njit(cache=True, nogil=True)
+def _ar_filter_kernel(x: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """:func:`_ar_filter` of the columns of a C-ordered (N, k) array. Each output is one chain of
+    subtractions in the lag order i = 1..p; four consecutive samples are computed side by side (four
+    independent chains, so the processor overlaps their latencies; the values are unchanged)."""
+    p = a.shape[0]
+    n, k = x.shape
+    m = max(n - p, 0)
+    out = np.empty((m, k))
+    col = np.empty(n)
+    for c in range(k):
+        for t in range(n):
+            col[t] = x[t, c]
+        t = 0
+        while t + 4 <= m:
+            v0, v1, v2, v3 = col[t + p], col[t + p + 1], col[t + p + 2], col[t + p + 3]
+            for i in range(p):
+                ai = a[i]
+                s = t + p - 1 - i
+                v0 -= ai * col[s]
+                v1 -= ai * col[s + 1]
+                v2 -= ai * col[s + 2]
+                v3 -= ai * col[s + 3]
+            out[t, c], out[t + 1, c], out[t + 2, c], out[t + 3, c] = v0, v1, v2, v3
+            t += 4
+        while t < m:
+            v = col[t + p]
+            for i in range(p):
+                v -= a[i] * col[t + p - 1 - i]
+            out[t, c] = v
+            t += 1
     return out
 
 
