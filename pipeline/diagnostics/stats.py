@@ -258,17 +258,27 @@ def levinson(r: np.ndarray, pmax: int) -> list[tuple[np.ndarray, float]]:
     return out
 
 
-def prewhiten_ar(e: np.ndarray, pmax: int = 20) -> tuple[np.ndarray, np.ndarray]:
-    """Residual of an AR(p) fitted by Yule–Walker with p ≤ ``pmax`` by AIC = N ln σ̂²_p + 2p (Akaike
-    1974): v_t = ẽ_t − Σ a_i ẽ_{t−i}, t = p..N−1 (ẽ centred). Returns (v, a); p = 0 gives v = ẽ."""
+def ar_coefficients(e: np.ndarray, pmax: int = 20) -> np.ndarray:
+    """Coefficients a of an AR(p) fitted to the centred e by Yule–Walker (Levinson–Durbin on the biased
+    autocovariances), p ≤ ``pmax`` (and ≤ N/10) chosen by AIC = N ln σ̂²_p + 2p (Akaike 1974); an empty
+    array for p = 0. The filter of :func:`prewhiten_ar` without its residual (the added-term tests
+    need only a: they filter e, J and S with it)."""
     x = np.asarray(e, float) - float(np.mean(e))
     n = len(x)
     pmax = int(max(0, min(pmax, n // 10)))
     if pmax == 0 or not np.any(x):
-        return x, np.zeros(0)
+        return np.zeros(0)
     fits = levinson(_acov(x, pmax), pmax)
     aic = [n * math.log(max(v, 1e-300)) + 2 * len(a) for a, v in fits]
-    a = fits[int(np.argmin(aic))][0]
+    return fits[int(np.argmin(aic))][0]
+
+
+def prewhiten_ar(e: np.ndarray, pmax: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Residual of the AR(p) of :func:`ar_coefficients`: v_t = ẽ_t − Σ a_i ẽ_{t−i}, t = p..N−1 (ẽ
+    centred). Returns (v, a); p = 0 gives v = ẽ."""
+    x = np.asarray(e, float) - float(np.mean(e))
+    n = len(x)
+    a = ar_coefficients(e, pmax)
     p = len(a)
     if p == 0:
         return x, a
@@ -324,7 +334,7 @@ def fisher_g(e: np.ndarray, alpha: float = 0.01) -> tuple[TestResult, float]:
     x0 = np.asarray(e, float) - float(np.mean(e))
     clean, ratio = _line_free(x0)
     q_all = max(1, (len(x0) - 1) // 2)
-    _, a = prewhiten_ar(clean if ratio > math.log(q_all / 1e-3) else x0)
+    a = ar_coefficients(clean if ratio > math.log(q_all / 1e-3) else x0)
     p_ar = len(a)
     x = x0[p_ar:] - sum(a[i] * x0[p_ar - 1 - i:len(x0) - 1 - i] for i in range(p_ar)) if p_ar else x0
     n = len(x)
@@ -471,7 +481,7 @@ def added_terms_test(e: np.ndarray, J: np.ndarray, S: np.ndarray, basis: np.ndar
         eu0 = e - S0 @ np.linalg.lstsq(S0, e, rcond=None)[0]
         e0 = float(e @ e)
         share = float(1.0 - float(eu0 @ eu0) / e0) if e0 > 0 else 0.0
-        _, a = prewhiten_ar(eu0, GLS_PMAX)
+        a = ar_coefficients(eu0, GLS_PMAX)
         if len(a) and len(e) > 4 * (len(a) + S.shape[1] + J.shape[1]):
             e, J, S = _ar_filter(e, a), _ar_filter(J, a), _ar_filter(S, a)
     if J.size:
