@@ -278,6 +278,19 @@ def test_cascaded_tanks_full_diagnosis_does_not_end_as_coloured_noise(tmp_path):
         for r in why["refitted"]:
             assert f"<code>{r['hypothesis']}</code>" in sec4
         assert sec4.count("unbounded below</td>") == sum(r["kind"] == "unbounded" for r in why["refitted"])
+        # and a figure draws what the two best refits of different causes would change: the models kept
+        # for it are the ones whose validation gains the table reports (their RMSE is the gain's "after")
+        import numpy as np
+        shown = run.diag.unaccepted
+        assert [lab.split(":")[0] for lab, _ in shown] == ["offset", "static_nonlinearity"]
+        after = {c["hypothesis"]: c["gain"]["after"] for c in d["history"][-1]["candidates"] if c.get("gain")}
+        val = run.prob.split.val_slice()
+        for lab, fit in shown:
+            hyp = lab.split(" (not accepted")[0]
+            rmse = float(np.sqrt(np.mean((run.prob.Y[val] - fit.Yhat[val]) ** 2)))
+            assert rmse == pytest.approx(after[hyp], rel=1e-12) and rmse < 0.75
+            assert f"{100 * (1 - rmse / s['nominal']['validation']['rmse_sim']):+.1f} %" in lab
+        assert 'alt="final model and the refitted extensions that were not accepted' in sec4
 
 
 @pytest.mark.realdata

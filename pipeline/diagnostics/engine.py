@@ -184,6 +184,8 @@ class Diagnosis:
     where: dict | None = None                                            # where an unexplained misfit is
     revisit: list[dict] = field(default_factory=list)   # moves of the backward step (:mod:`.revisit`)
     rounding: str | None = None     # why nothing was tested: the nominal model fits to rounding error
+    # an unexplained verdict's best refits of the final model that were not accepted (:func:`unaccepted_fits`)
+    unaccepted: list[tuple[str, FitResult]] = field(default_factory=list)
 
 
 REFIT_SHARE = 0.2     # see Diagnoser._screen
@@ -238,6 +240,29 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     normalised RMSE and a position in metres is not drowned by a voltage."""
     r = val_resid(fit, prob)
     return r if r.shape[1] == 1 else r / output_scales(prob)
+
+
+UNACCEPTED_SHOWN = 2   # refitted-but-not-accepted extensions drawn beside an unexplained verdict's final model
+
+
+def unaccepted_fits(base: FitResult, cands: list) -> list[tuple[str, FitResult]]:
+    """An unexplained verdict's picture of what was tried: the refits of the final model ``base`` (the
+    last round's candidates) that lowered the validation error (point gain > 0) without being accepted,
+    the largest gain of each family first, at most ``UNACCEPTED_SHOWN`` families. Each is labelled with
+    its hypothesis and its validation gain; the report draws them beside the final model (the reasons
+    they were not accepted are the history's). On the cascaded tanks: an offset (+47.2 %) and a
+    square-root outflow (+46.5 %) that the record cannot tell apart nor bound."""
+    rows = [c for c in cands if c.fit is not None and c.gain and not c.accepted and c.gain["relative"] > 0]
+    rows.sort(key=lambda c: -c.gain["relative"])
+    out, seen = [], set()
+    for c in rows:
+        if c.hyp.family in seen:
+            continue
+        seen.add(c.hyp.family)
+        out.append((f"{c.hyp.key} (not accepted; {100 * c.gain['relative']:+.1f} %)", c.fit))
+        if len(out) == UNACCEPTED_SHOWN:
+            break
+    return out
 
 
 def lr_against(current: FitResult, refit: FitResult, alpha: float, searched: int = 0,
@@ -1538,6 +1563,7 @@ class Diagnoser:
         side.shutdown(wait=False)
         tests0, f_cyc0 = tests_of(nominal)
         findings, history = [], []
+        last_round: tuple = (None, [])
         links: list[Link] = []          # the forward pass: its fits, the form test's steps, the backward step
         switched = "intersample" not in self.families   # the intersample choice is made at most once
         last_p: dict[str, float] | None = None             # family p-values on the final model
@@ -1548,6 +1574,7 @@ class Diagnoser:
                 continue
             rnd = self._propose(current, it, tests_of, switched)
             cands, inter, last_p, last_r2 = rnd.cands, rnd.inter, rnd.last_p, rnd.last_r2
+            last_round = (current, cands)   # the fit the round extended and its candidates (their refits)
             history.append(rnd.record(it))
             acc = [c for c in cands if c.accepted]
             best = self.separate(choose(acc), acc)
@@ -1572,6 +1599,7 @@ class Diagnoser:
                     break
                 first, first_fit, best, rnd2 = ahead
                 history.append(rnd2.record(it + 1))
+                last_round = (first_fit, rnd2.cands)
                 findings.append(self.finding(first, [c for c in cands if c is not first and c.gain is not None
                                                      and c.delta_bic_eff is not None]))
                 links.append(Link("look-ahead", current, first_fit, first, self._alternatives(first, cands)))
@@ -1693,7 +1721,9 @@ class Diagnoser:
         tests0 = list(tests0) + feedback_tests(nominal, prob, self.alpha)
         return Diagnosis(nominal, current, findings, tests0, history, fits, noise_tests, final_tests,
                          adequacy=adequacy, adequacy_nominal=nominal_adequacy,
-                         verdict=verdict, where=where, revisit=moves)
+                         verdict=verdict, where=where, revisit=moves,
+                         unaccepted=unaccepted_fits(*last_round) if verdict == "unexplained_discrepancy"
+                         and last_round[0] is current else [])
 
     # a residual RMS below this share of the output's RMS, on the estimation and the validation part, is
     # floating-point rounding, not measurement noise: a 24-bit converter's quantisation is about 2e-8 of

@@ -68,6 +68,10 @@ def _figures(ctx, units: dict, alpha: float, labels: list[str]) -> dict:
             return figures.error_model_plot(rows, units)
         jobs.append(("error_model", emm))
     jobs.append(("ellipses_nominal", lambda: figures.corner(diag.nominal, region_critical(diag.nominal.identifiability, 2))))
+    if diag.unaccepted:    # an unexplained verdict: what the best refits that were not accepted would change
+        jobs.append(("unaccepted", lambda: figures.compare(ctx, [diag.final] + [f for _, f in diag.unaccepted],
+                                                           [labels[-1]] + [lab for lab, _ in diag.unaccepted],
+                                                           units, ZOOM)))
     for k, fit in enumerate(fits[1:]):
         jobs.append((f"finding_{k}", lambda k=k, fit=fit: figures.compare(ctx, [fits[k], fit], [labels[k], labels[k + 1]],
                                                                           units, ZOOM)))
