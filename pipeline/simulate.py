@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import kernel_cache
 from .errors import InputError, SimulationError
 from .expressions import to_source
 from .model import Model, term_on
@@ -632,24 +633,35 @@ def get_kernel(model: Model):
 
 
 def _load_kernel(key: str, src: str):
-    """Write the kernel's source to the cache folder (atomically, only when it changed) and import it."""
+    """Write the kernel's source to the cache folder (atomically, only when it changed) and import it.
+    The folder is kept to a bounded size (:mod:`pipeline.kernel_cache`: least recently used kernels
+    pruned once per process, before its first load); a module removed by another process's prune between
+    the check and the import is written again."""
     d = _cache_dir()
+    kernel_cache.prune_once(d)
     path = d / f"k_{key}.py"
-    if not path.exists() or path.read_text() != src:
+    kernel_cache.mark_used(d, key)
+    for attempt in (0, 1):
+        if attempt or not path.exists() or path.read_text() != src:
+            try:
+                fd, tmp = tempfile.mkstemp(dir=d, suffix=".tmp")
+                with os.fdopen(fd, "w") as fh:
+                    fh.write(src)
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise InputError(f"SYSID_KERNEL_CACHE: cannot write the kernel {path}: {exc.strerror or exc}; "
+                                 "expected a writable folder for the compiled simulation kernels") from None
+        modname = f"sysid_kernel_{key}"
+        spec = importlib.util.spec_from_file_location(modname, path)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[modname] = mod
         try:
-            fd, tmp = tempfile.mkstemp(dir=d, suffix=".tmp")
-            with os.fdopen(fd, "w") as fh:
-                fh.write(src)
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise InputError(f"SYSID_KERNEL_CACHE: cannot write the kernel {path}: {exc.strerror or exc}; "
-                             "expected a writable folder for the compiled simulation kernels") from None
-    modname = f"sysid_kernel_{key}"
-    spec = importlib.util.spec_from_file_location(modname, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[modname] = mod
-    spec.loader.exec_module(mod)
-    return mod.simulate, mod.simulate0, mod.simulate1
+            spec.loader.exec_module(mod)
+        except FileNotFoundError:
+            if attempt:
+                raise
+            continue
+        return mod.simulate, mod.simulate0, mod.simulate1
 
 
 @dataclass
