@@ -238,10 +238,42 @@ def _raise_if_undefined(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarr
                               key=f"model.equations.{bad[0]}")
 
 
-def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
+def _partial_rows(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray | None:
+    """Free-run outputs of every segment up to the sample where its simulation stops (NaN from there
+    on), the estimation rows from the fitted (warm-up) simulation; None when an estimation row is
+    not finite (the fitted simulation itself fails)."""
+    out = np.full((len(prob.t), prob.Y.shape[1]), np.nan)
+    for s0, s1 in prob.segments(False):
+        res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
+                              bound=prob.bound, prefiltered=True)
+        k = s1 - s0 if res.diverged_at is None else res.diverged_at
+        if k > 0:
+            with np.errstate(all="ignore"):
+                out[s0:s0 + k] = outputs(model, prob.t[s0:s0 + k], prob.U[s0:s0 + k], res.X[:k], prob.out_names)
+    e0, e1 = prob.split.est
+    if prob.warmup_start:
+        Yw = simulate_until(model, prob, x0, e1)
+        if Yw is None:
+            return None
+        out[e0:e1] = Yw[e0:e1]
+    return out if np.all(np.isfinite(out[e0:e1])) else None
+
+
+def undefined_from(Yhat: np.ndarray, prob: Problem) -> int | None:
+    """The first validation row whose free-run output is not finite (the simulation stopped there:
+    :func:`simulate_full` with ``partial``), or None when the whole validation part is defined."""
+    sl = prob.split.val_slice()
+    bad = ~np.all(np.isfinite(Yhat[sl]), axis=1)
+    return int(sl.start + np.argmax(bad)) if bad.any() else None
+
+
+def simulate_full(model: Model, prob: Problem, x0: np.ndarray, partial: bool = False) -> np.ndarray:
     """Free-run outputs over the whole record (the reported numbers): the estimation rows from the
     fitted (warm-up) simulation, every other row from the records' own segments (so validation samples
-    never sit in a warm-up transient). SimulationError if the model diverges."""
+    never sit in a warm-up transient). SimulationError if the model diverges; with ``partial``, only if
+    it diverges on the estimation rows: elsewhere the rows from where a segment's simulation stops are
+    NaN (a nominal model whose fit is undefined on part of the validation record is reported as such,
+    :func:`undefined_from`, and diagnosed)."""
     Yh = simulate_rows(model, prob, x0, 0, len(prob.t), warm=False)
     if Yh is not None and prob.warmup_start:
         Yw = simulate_until(model, prob, x0, prob.split.est[1])
@@ -250,6 +282,8 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray:
         else:
             e0, e1 = prob.split.est
             Yh[e0:e1] = Yw[e0:e1]
+    if Yh is None and partial:
+        Yh = _partial_rows(model, prob, x0)
     if Yh is None:
         for s0, s1 in prob.segments(True):
             res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
@@ -523,7 +557,7 @@ def stable_jacobian(resid, th: np.ndarray, deferred=None, ub: np.ndarray | None 
 def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | None = None,
                      max_nfev: int = 200, loss="linear", f_scale: float = 1.0,
                      sample_weights: np.ndarray | None = None, abandon_above: float | None = None,
-                     abandon_after: int = 0, ftol: float = 1e-8) -> FitResult:
+                     abandon_after: int = 0, ftol: float = 1e-8, partial: bool = False) -> FitResult:
     """Output-error fit of ``model.free`` (and initial states marked "estimate").
 
     ``abandon_above``: raise :class:`RefitAbandoned` once ``abandon_after`` simulations (Jacobian
@@ -537,7 +571,9 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     log-likelihood as a callable of z = r²); ``sample_weights`` (n_est,) multiply each estimation
     sample's residual (weighted LS, e.g. 1/σ_k for a variance model); (n_est, ny) weight each output's
     sample separately. ``ftol``: least_squares' relative cost tolerance (its default 1e-8; a looser one
-    where the fit only ranks alternatives, e.g. the jump family's grid of break dates)."""
+    where the fit only ranks alternatives, e.g. the jump family's grid of break dates). ``partial``: a
+    fitted model whose simulation stops (NaN, divergence) outside the estimation rows is returned with
+    NaN there instead of raising (:func:`simulate_full`; the nominal fit of the diagnosis)."""
     est = prob.split.est
     stop = est[1]
     w = prob.weights
@@ -658,7 +694,7 @@ def fit_output_error(model: Model, prob: Problem, *, start: dict[str, float] | N
     else:
         th, J, ok, msg, nfev = th0, np.zeros((yobs.size, 0)), True, "nothing to fit", 0
     m, x0 = unpack(th)
-    Yh = simulate_full(m, prob, x0)
+    Yh = simulate_full(m, prob, x0, partial)
     r = yobs - Yh[est[0]:stop]      # simulate_full uses the same segments: the fitted simulation
     rw = (r * w * sw).ravel()
     sse = float(rw @ rw)

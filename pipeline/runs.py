@@ -32,9 +32,9 @@ from .config import LoadedConfig, implemented_families, load_config, noise_famil
 from .errors import ConfigError, InputError, SimulationError, in_file
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
 from .diagnostics.coverage import coverage
-from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse, val_resid
+from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse
 from .diagnostics.why import why_unexplained
-from .fit import FitResult, Problem, at_bounds, equation_error_start, param_intervals
+from .fit import FitResult, Problem, at_bounds, equation_error_start, param_intervals, undefined_from
 from .extended import extended_config
 from .model import Model
 from .runfolder import check_target, finalize, kill_point, make_temp, publish
@@ -57,19 +57,28 @@ class RunContext:
 
 
 def model_block(fit: FitResult, prob: Problem) -> dict:
+    """A model's summary block; when its simulation stops on the validation part (only the nominal
+    model's may: :func:`pipeline.fit.simulate_full` with ``partial``) the validation numbers are over the
+    samples before, and ``undefined_from_s`` says from when."""
     sl = prob.split.val_slice()
-    r = val_resid(fit, prob)
+    stop = undefined_from(fit.Yhat, prob)
+    if stop is not None:
+        sl = slice(sl.start, stop)
+    r = prob.Y[sl] - fit.Yhat[sl]
     return {"params": dict(zip(fit.names, fit.theta)), "param_std": dict(zip(fit.names, fit.std)),
             # 95 % intervals θ̂ ± t_ν σ with the covariance's own degrees of freedom (fit.param_intervals)
             "param_ci95": {n: (list(ci) if ci else None) for n, ci in zip(fit.names, param_intervals(fit))},
             "estimation": {"rmse_sim": rmse(fit.resid_est),
                            "fit_percent": fit_percent(prob.Y[prob.split.est_slice()],
                                                       fit.Yhat[prob.split.est_slice()])},
-            "validation": {"rmse_sim": rmse(r), "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl]),
+            "validation": {"rmse_sim": rmse(r) if len(r) else None,
+                           "fit_percent": fit_percent(prob.Y[sl], fit.Yhat[sl]) if len(r) else None,
                            **({"per_output": {name: {"rmse_sim": rmse(r[:, i]),
                                                      "fit_percent": fit_percent(prob.Y[sl, i], fit.Yhat[sl, i])}
                                               for i, name in enumerate(prob.out_names)}}
-                              if r.shape[1] > 1 else {})},
+                              if r.shape[1] > 1 else {}),
+                           **({"undefined_from_s": float(prob.t[stop]), "samples": int(stop - sl.start)}
+                              if stop is not None else {})},
             "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
             "identifiability": fit.identifiability.record() if fit.identifiability else None,
             **({"at_bound": at_bounds(fit)} if fit.model.bounds else {})}
@@ -257,7 +266,7 @@ def _test_rows(tests, on: str) -> list[dict]:
     on an inadequate structure), whose ``passed`` is then false without anything having failed."""
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
              "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail,
-             "on": on,
+             "on": getattr(t, "on", None) or on,
              **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
             for t in tests]
 

@@ -39,7 +39,7 @@ from threadpoolctl import threadpool_limits
 
 from .. import criteria
 from ..fit import (FitResult, Problem, estimated_x0, excited_inputs, fit_output_error, simulate_until, stable_quotient,
-                   states_full)
+                   states_full, undefined_from)
 from ..model import Model, rhs_vectorized, switches, term_on
 from ..simulate import outputs, simulate_states
 from . import stats
@@ -240,6 +240,25 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     normalised RMSE and a position in metres is not drowned by a voltage."""
     r = val_resid(fit, prob)
     return r if r.shape[1] == 1 else r / output_scales(prob)
+
+
+def validation_undefined(fit: FitResult, prob: Problem, stop: int, which: str) -> stats.TestResult:
+    """The failed adequacy row of a model whose free-run simulation stops on the validation part (a NaN
+    or a divergence from sample ``stop``; :func:`pipeline.fit.simulate_full` with ``partial``): what the
+    simulation gets wrong includes that it cannot follow the record there at all, so the model is not
+    adequate however its estimation residual looks (material: its share is 1). Its validation figures
+    and every gain against it are computed on the rows before ``stop``."""
+    sl = prob.split.val_slice()
+    share = (sl.stop - stop) / (sl.stop - sl.start)
+    t = prob.t[stop]
+    row = stats.TestResult(
+        "validation_simulation", float(share), 0.0, None, False,
+        f"the {which} model's free-run simulation stops at sample {stop} (t = {t:.6g} s) of the validation part "
+        f"(NaN or divergence: an expression undefined there, e.g. the root of a negative state, or a state "
+        f"growing without bound); {100 * share:.3g} % of the validation part has no simulated value, and its "
+        "validation numbers and gains are computed on the samples before", r2=1.0)
+    row.on = f"{which} model, validation data"
+    return row
 
 
 UNACCEPTED_SHOWN = 2   # refitted-but-not-accepted extensions drawn beside an unexplained verdict's final model
@@ -475,7 +494,8 @@ class Diagnoser:
         i = m.states.index(term.target)
         dscale = float(np.nanstd(np.gradient(X[:, i], self.dt))) or 1.0
         Xm = X if X.shape[1] == len(m.states) else states_full(m, self.prob, self._x0_for(fit, m))
-        vals = term_on(m, term, Xm, self.prob.U, self.prob.t)
+        with np.errstate(invalid="ignore"):   # a term undefined off the estimation part (√u of a validation
+            vals = term_on(m, term, Xm, self.prob.U, self.prob.t)   # input below 0) is NaN: nanmean skips it
         tscale = float(np.sqrt(np.nanmean(vals ** 2))) or 1.0
         return 1e-3 * dscale / tscale
 
@@ -1349,11 +1369,11 @@ class Diagnoser:
         when both fail the first error is raised. The two fits are independent and run side by side
         (the kernel releases the GIL): about 0.3 s of Silverbox's nominal stage."""
         if not start:
-            return fit_output_error(model, self.prob)
+            return fit_output_error(model, self.prob, partial=True)
 
         def one(s):
             try:
-                return fit_output_error(model, self.prob, start=s), None
+                return fit_output_error(model, self.prob, start=s, partial=True), None
             except SimulationError as exc:
                 return None, exc
 
@@ -1638,6 +1658,10 @@ class Diagnoser:
                 last_r2 = _family_r2(cands)
             adequacy = rows.result() + probe.result()
         nominal_adequacy = nominal_job.result()
+        for fit, rows_of in ((current, adequacy), (nominal, nominal_adequacy)):
+            stop = undefined_from(fit.Yhat, prob)
+            if stop is not None:
+                rows_of.append(validation_undefined(fit, prob, stop, "final" if rows_of is adequacy else "nominal"))
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
             # not accepted: a direction the model misses that no family's extension explains

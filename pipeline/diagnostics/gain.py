@@ -88,13 +88,24 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
     φ = 0.98 in ``tests/diagnosis/test_mc_calibration.py`` (measured ≤ 2.8 % at the 5 % level: the
     after-model's own misfit counts as noise, which is conservative)."""
     b, a = np.atleast_2d(before.T).T, np.atleast_2d(after.T).T
+    # a model whose simulation stops on the validation part (the nominal fit, :func:`pipeline.fit.
+    # simulate_full` with ``partial``) is compared on the samples where both are defined
+    both = np.all(np.isfinite(b), axis=1) & np.all(np.isfinite(a), axis=1)
+    compared = {} if both.all() else {"samples_compared": int(both.sum()), "samples": len(both)}
+    if compared:
+        if not both.any():
+            return {"metric": "validation_rmse_sim", "before": float("nan"), "after": float("nan"), "relative": 0.0,
+                    "ci95": [0.0, 0.0], **compared, **({"p_not_lower": 1.0} if one_sided else {}),
+                    "bootstrap": {"method": "none (no validation sample where both models are defined)",
+                                  "block": None, "n": 0}}
+        b, a = b[both], a[both]
     # mean over outputs: ``before``/``after`` are then the RMSE over all residuals (the summary's rmse_sim)
     b2, a2 = np.mean(b ** 2, axis=1), np.mean(a ** 2, axis=1)
     rb, ra = math.sqrt(float(np.mean(b2))), math.sqrt(float(np.mean(a2)))
     rel = 1.0 - ra / rb if rb > 0 else 0.0
     if rb <= 0 or ra <= 0 or len(b2) < 8:
         ci = [rel, rel] if ra > 0 or rb <= 0 else [rel, 1.0]
-        return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
+        return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci, **compared,
                 **({"p_not_lower": 0.0 if rel > 0 else 1.0} if one_sided else {}),
                 "bootstrap": {"method": "none (degenerate residuals)", "block": None, "n": len(b2)}}
     # δ_t = b_t − a_t = ŷ_a − ŷ_b: fixed given the input and the fitted models
@@ -108,7 +119,7 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
     lo, hi = max(lo, -L_CLIP), min(hi, L_CLIP)
     ci = [float(min(-math.expm1(-lo), rel)), float(max(-math.expm1(-hi), rel))]
     return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
-            "ci95_meaning": CI_MEANING, **extra,
+            "ci95_meaning": CI_MEANING, **compared, **extra,
             "bootstrap": {"method": "delta method on the noise-driven part of the loss differential given the "
                                         "validation input, prewhitened EWC long-run variance, Student t",
                           "block": None, "dof": dof, "n": len(b2)}}

@@ -16,7 +16,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
 from ..diagnostics.adequacy import FIR_ORDER
-from ..fit import excited_inputs, param_intervals, region_critical
+from ..fit import excited_inputs, param_intervals, region_critical, undefined_from
 from ..hac import hotelling_critical
 from . import analysis, figures, view
 
@@ -25,12 +25,22 @@ BAND_DRAWS = 40         # parameter draws for the response band
 
 
 def _fit_rows(ctx, labels) -> list[dict]:
+    """One row per model of the chain; a model whose simulation stops on the validation part (only the
+    nominal one may) is measured on the samples before, as in summary.json (``runs.model_block``)."""
     prob = ctx.prob
-    sl = prob.split.val_slice()
     es = prob.split.est_slice()
-    return [{"name": lab, "val_fit": fit_percent(prob.Y[sl], f.Yhat[sl]), "val_rmse": rmse(prob.Y[sl] - f.Yhat[sl]),
-             "est_fit": fit_percent(prob.Y[es], f.Yhat[es]), "n_params": f.n_params}
-            for f, lab in zip(ctx.diag.fits, labels)]
+    rows = []
+    for f, lab in zip(ctx.diag.fits, labels):
+        sl = prob.split.val_slice()
+        stop = undefined_from(f.Yhat, prob)
+        if stop is not None:
+            sl = slice(sl.start, stop)
+        ok = sl.stop > sl.start
+        rows.append({"name": lab, "val_fit": fit_percent(prob.Y[sl], f.Yhat[sl]) if ok else None,
+                     "val_rmse": rmse(prob.Y[sl] - f.Yhat[sl]) if ok else None,
+                     "est_fit": fit_percent(prob.Y[es], f.Yhat[es]), "n_params": f.n_params,
+                     "stops_at": None if stop is None else float(prob.t[stop])})
+    return rows
 
 
 def _chain_labels(ctx) -> list[str]:

@@ -108,6 +108,12 @@ def compare(ctx, fits: list, labels: list[str], units: dict[str, str], zoom: int
         _trace(ax, t, y, "k", "measured", measured=True)
         for fit, lab, col in zip(fits, labels, COLORS):
             _trace(ax, t, fit.Yhat[sl, i], col, lab)
+            stop = ~np.isfinite(fit.Yhat[sl, i])
+            if stop.any():     # the simulation stops (NaN or divergence) from here: say so where it ends
+                k = int(np.argmax(stop))
+                ax.axvline(t[k], color=col, ls=":", lw=1.0)
+                ax.annotate("simulation stops", (t[k], 0.97), xycoords=("data", "axes fraction"), color=col,
+                            fontsize=8, ha="right", va="top", rotation=90)
         ax.set_ylabel(label(name, units))
         ax.set_xlabel("time [s]")
         if not zoomed:

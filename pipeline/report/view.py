@@ -152,6 +152,13 @@ def first_screen(s: dict) -> dict:
     lines = []
     per = nom.get("per_output") or {}
     opening = f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal model misses "
+    stops = nom.get("undefined_from_s")
+    if stops is not None:
+        # its simulation stops on the validation part (a NaN or a divergence): that comes first, and the
+        # numbers are over the samples before
+        opening = (f"On validation data ({horizon}, free-run simulation, never used for fitting) the nominal "
+                   f"model's simulation stops at t = {sig(stops, 6)} s (NaN or divergence) and has no value on "
+                   f"the rest; over the {nom.get('samples')} samples before, it misses ")
     if len(per) > 1:
         # several outputs: each in its own scale (a pooled fit or RMSE would mix their units)
         lines.append(opening + ", ".join(f"{sig(100 - v['fit_percent'], 3)} % of {name}'s variation "
@@ -205,6 +212,8 @@ def first_screen(s: dict) -> dict:
             lines.append(f"{head} Adding it lowers the validation {err} by "
                          f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
                          f"{interval} for this validation input"
+                         + (f"; on the {g['samples_compared']} of {g['samples']} validation samples where the "
+                            "nominal model's simulation is defined" if g.get("samples_compared") is not None else "")
                          + (f"; one-sided p = {sig(g['p_not_lower'], 2)} that it is not lower"
                             if g.get("p_not_lower") is not None else "") + ").")
         if len(findings) > 1:
@@ -219,6 +228,11 @@ def first_screen(s: dict) -> dict:
         lines.append("No effect family explains the residual: the nominal model is adequate at the tested "
                      f"level α = {diag.get('alpha')}.")
     warnings = []
+    if fin.get("undefined_from_s") is not None:
+        warnings.append(f"The final model's free-run simulation stops at t = {sig(fin['undefined_from_s'], 6)} s of the "
+                        "validation part (an expression undefined there, e.g. the root of a negative state, or a "
+                        "state growing without bound): it cannot be used to simulate this record; its validation "
+                        f"numbers are over the {fin.get('samples')} samples before.")
     ff = fin.get("fit_percent")
     if ff is not None and ff < 0:
         warnings.append(f"The final model is unusable on validation data: fit {sig(ff, 3)} % is worse than "

@@ -123,6 +123,20 @@ def test_first_screen_says_how_much_is_missed_the_cause_and_the_gain():
     assert fs["warnings"] == []
 
 
+def test_first_screen_says_where_the_nominal_simulation_stops_and_on_which_samples_the_gain_is():
+    """A nominal model whose simulation stops on the validation part (``undefined_from_s``): the opening
+    says so before its numbers, and the first finding's gain names the samples it was measured on."""
+    s = _summary(62.39, 97.6)
+    s["nominal"]["validation"].update({"undefined_from_s": 7.5, "samples": 250})
+    s["diagnosis"]["findings"][0]["gain"].update({"samples_compared": 250, "samples": 1000})
+    text = " ".join(view.first_screen(s)["lines"])
+    assert "the nominal model's simulation stops at t = 7.5 s" in text
+    assert "over the 250 samples before, it misses 37.6 %" in text
+    assert "on the 250 of 1000 validation samples where the nominal model's simulation is defined" in text
+    plain = " ".join(view.first_screen(_summary(62.39, 97.6))["lines"])
+    assert "stops" not in plain and "samples where" not in plain
+
+
 def test_first_screen_says_when_the_validation_part_prefers_another_cause():
     """``disputed_by`` (engine ``Diagnoser._disputed``): the estimation part chose the finding beyond a tie,
     the validation part clearly prefers another; the first screen says the two parts disagree."""
