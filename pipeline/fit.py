@@ -267,6 +267,14 @@ def undefined_from(Yhat: np.ndarray, prob: Problem) -> int | None:
     return int(sl.start + np.argmax(bad)) if bad.any() else None
 
 
+def defined_validation_rows(Yhat: np.ndarray, prob: Problem) -> np.ndarray:
+    """Indices of the validation rows whose free-run outputs are all finite: every row of the part
+    unless the simulation stopped (:func:`undefined_from`); the rows validation numbers are computed on."""
+    sl = prob.split.val_slice()
+    rows = np.arange(sl.start, sl.stop)
+    return rows[np.all(np.isfinite(Yhat[sl]), axis=1)]
+
+
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray, partial: bool = False) -> np.ndarray:
     """Free-run outputs over the whole record (the reported numbers): the estimation rows from the
     fitted (warm-up) simulation, every other row from the records' own segments (so validation samples

@@ -34,7 +34,8 @@ from .data import Record, Split, apply_prefilters, file_sha256, load_record, mak
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse
 from .diagnostics.why import why_unexplained
-from .fit import FitResult, Problem, at_bounds, equation_error_start, param_intervals, undefined_from
+from .fit import (FitResult, Problem, at_bounds, defined_validation_rows, equation_error_start, param_intervals,
+                  undefined_from)
 from .extended import extended_config
 from .model import Model
 from .runfolder import check_target, finalize, kill_point, make_temp, publish
@@ -59,11 +60,12 @@ class RunContext:
 def model_block(fit: FitResult, prob: Problem) -> dict:
     """A model's summary block; when its simulation stops on the validation part (only the nominal
     model's may: :func:`pipeline.fit.simulate_full` with ``partial``) the validation numbers are over the
-    samples before, and ``undefined_from_s`` says from when."""
+    samples where it is defined (those before the stop, and those of a later validation record that
+    starts again), ``samples`` of them, and ``undefined_from_s`` says from when."""
     sl = prob.split.val_slice()
     stop = undefined_from(fit.Yhat, prob)
     if stop is not None:
-        sl = slice(sl.start, stop)
+        sl = defined_validation_rows(fit.Yhat, prob)
     r = prob.Y[sl] - fit.Yhat[sl]
     return {"params": dict(zip(fit.names, fit.theta)), "param_std": dict(zip(fit.names, fit.std)),
             # 95 % intervals θ̂ ± t_ν σ with the covariance's own degrees of freedom (fit.param_intervals)
@@ -77,7 +79,7 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
                                                      "fit_percent": fit_percent(prob.Y[sl, i], fit.Yhat[sl, i])}
                                               for i, name in enumerate(prob.out_names)}}
                               if r.shape[1] > 1 else {}),
-                           **({"undefined_from_s": float(prob.t[stop]), "samples": int(stop - sl.start)}
+                           **({"undefined_from_s": float(prob.t[stop]), "samples": int(len(sl))}
                               if stop is not None else {})},
             "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
             "identifiability": fit.identifiability.record() if fit.identifiability else None,

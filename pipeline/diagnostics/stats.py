@@ -517,7 +517,7 @@ def _ar_filter(x: np.ndarray, a: np.ndarray) -> np.ndarray:
 
     Each v_t is x_t minus the lag terms in the order i = 1..p, the arithmetic of a whole-array numpy
     loop over the lags (``x[p:] − a_1 x[p−1:−1] − …``), so the values are the same to the last bit
-    (``tests/diagnosis/test_stats.py``). A compiled loop (:func:`_ar_filter_kernel`), four samples at a
+    (``tests/test_stats.py``). A compiled loop (:func:`_ar_filter_kernel`), four samples at a
     time: Silverbox's added-term tests filter about 90 000 × 6 values with p = 10, 6.1 ms in numpy
     (blocked to stay in cache), 2.4 ms compiled, one thread; the kernel releases the GIL."""
     x = np.asarray(x, float)

@@ -16,7 +16,7 @@ from jinja2 import Environment, PackageLoader, select_autoescape
 from .. import progress
 from ..diagnostics.engine import fit_percent, rmse
 from ..diagnostics.adequacy import FIR_ORDER
-from ..fit import excited_inputs, param_intervals, region_critical, undefined_from
+from ..fit import defined_validation_rows, excited_inputs, param_intervals, region_critical, undefined_from
 from ..hac import hotelling_critical
 from . import analysis, figures, view
 
@@ -34,8 +34,8 @@ def _fit_rows(ctx, labels) -> list[dict]:
         sl = prob.split.val_slice()
         stop = undefined_from(f.Yhat, prob)
         if stop is not None:
-            sl = slice(sl.start, stop)
-        ok = sl.stop > sl.start
+            sl = defined_validation_rows(f.Yhat, prob)
+        ok = len(prob.Y[sl]) > 0
         rows.append({"name": lab, "val_fit": fit_percent(prob.Y[sl], f.Yhat[sl]) if ok else None,
                      "val_rmse": rmse(prob.Y[sl] - f.Yhat[sl]) if ok else None,
                      "est_fit": fit_percent(prob.Y[es], f.Yhat[es]), "n_params": f.n_params,
