@@ -205,9 +205,10 @@ def segment_x0(model: Model, prob: Problem, start: int, x0_fit: np.ndarray) -> n
 
 
 def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: int, *,
-                  warm: bool = True) -> np.ndarray | None:
+                  warm: bool = True, partial: bool = False) -> np.ndarray | None:
     """Free-run outputs on rows [0, b), simulating every segment that overlaps [a, b) (rows of other
-    segments are NaN); None if the model diverges in one of them. ``warm``: with the warm-up restart."""
+    segments are NaN); None if the model diverges in one of them. ``warm``: with the warm-up restart.
+    ``partial``: a segment that diverges keeps its rows up to the divergence, NaN from there on."""
     out = np.full((b, prob.Y.shape[1]), np.nan)
     for s0, s1 in prob.segments(warm):
         if s1 <= a or s0 >= b:
@@ -215,9 +216,14 @@ def simulate_rows(model: Model, prob: Problem, x0_fit: np.ndarray, a: int, b: in
         stop = min(s1, b)
         res = simulate_states(model, prob.t[s0:stop], prob.inputs(model)[s0:stop],
                               segment_x0(model, prob, s0, x0_fit), bound=prob.bound, prefiltered=True)
-        if res.diverged_at is not None:
+        if res.diverged_at is None:
+            out[s0:stop] = outputs(model, prob.t[s0:stop], prob.U[s0:stop], res.X, prob.out_names)
+        elif not partial:
             return None
-        out[s0:stop] = outputs(model, prob.t[s0:stop], prob.U[s0:stop], res.X, prob.out_names)
+        else:
+            k = s0 + res.diverged_at
+            with np.errstate(all="ignore"):
+                out[s0:k] = outputs(model, prob.t[s0:k], prob.U[s0:k], res.X[:k - s0], prob.out_names)
     return out
 
 
@@ -238,27 +244,6 @@ def _raise_if_undefined(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarr
                               key=f"model.equations.{bad[0]}")
 
 
-def _partial_rows(model: Model, prob: Problem, x0: np.ndarray) -> np.ndarray | None:
-    """Free-run outputs of every segment up to the sample where its simulation stops (NaN from there
-    on), the estimation rows from the fitted (warm-up) simulation; None when an estimation row is
-    not finite (the fitted simulation itself fails)."""
-    out = np.full((len(prob.t), prob.Y.shape[1]), np.nan)
-    for s0, s1 in prob.segments(False):
-        res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
-                              bound=prob.bound, prefiltered=True)
-        k = s1 - s0 if res.diverged_at is None else res.diverged_at
-        if k > 0:
-            with np.errstate(all="ignore"):
-                out[s0:s0 + k] = outputs(model, prob.t[s0:s0 + k], prob.U[s0:s0 + k], res.X[:k], prob.out_names)
-    e0, e1 = prob.split.est
-    if prob.warmup_start:
-        Yw = simulate_until(model, prob, x0, e1)
-        if Yw is None:
-            return None
-        out[e0:e1] = Yw[e0:e1]
-    return out if np.all(np.isfinite(out[e0:e1])) else None
-
-
 def undefined_from(Yhat: np.ndarray, prob: Problem) -> int | None:
     """The first validation row whose free-run output is not finite (the simulation stopped there:
     :func:`simulate_full` with ``partial``), or None when the whole validation part is defined."""
@@ -267,12 +252,13 @@ def undefined_from(Yhat: np.ndarray, prob: Problem) -> int | None:
     return int(sl.start + np.argmax(bad)) if bad.any() else None
 
 
-def defined_validation_rows(Yhat: np.ndarray, prob: Problem) -> np.ndarray:
-    """Indices of the validation rows whose free-run outputs are all finite: every row of the part
-    unless the simulation stopped (:func:`undefined_from`); the rows validation numbers are computed on."""
+def defined_validation_rows(Yhat: np.ndarray, prob: Problem) -> slice | np.ndarray:
+    """The validation rows validation numbers are computed on: the part's slice when every free-run
+    output is finite, else the indices of the rows that are (the simulation stopped:
+    :func:`undefined_from`)."""
     sl = prob.split.val_slice()
-    rows = np.arange(sl.start, sl.stop)
-    return rows[np.all(np.isfinite(Yhat[sl]), axis=1)]
+    ok = np.all(np.isfinite(Yhat[sl]), axis=1)
+    return sl if ok.all() else np.arange(sl.start, sl.stop)[ok]
 
 
 def simulate_full(model: Model, prob: Problem, x0: np.ndarray, partial: bool = False) -> np.ndarray:
@@ -282,16 +268,16 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray, partial: bool = F
     it diverges on the estimation rows: elsewhere the rows from where a segment's simulation stops are
     NaN (a nominal model whose fit is undefined on part of the validation record is reported as such,
     :func:`undefined_from`, and diagnosed)."""
-    Yh = simulate_rows(model, prob, x0, 0, len(prob.t), warm=False)
+    Yh = simulate_rows(model, prob, x0, 0, len(prob.t), warm=False, partial=partial)
+    e0, e1 = prob.split.est
     if Yh is not None and prob.warmup_start:
-        Yw = simulate_until(model, prob, x0, prob.split.est[1])
+        Yw = simulate_until(model, prob, x0, e1)
         if Yw is None:
             Yh = None
         else:
-            e0, e1 = prob.split.est
             Yh[e0:e1] = Yw[e0:e1]
-    if Yh is None and partial:
-        Yh = _partial_rows(model, prob, x0)
+    if Yh is not None and partial and not np.all(np.isfinite(Yh[e0:e1])):
+        Yh = None         # the fitted simulation itself stops: the error below names where
     if Yh is None:
         for s0, s1 in prob.segments(True):
             res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),

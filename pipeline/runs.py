@@ -62,10 +62,8 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
     model's may: :func:`pipeline.fit.simulate_full` with ``partial``) the validation numbers are over the
     samples where it is defined (those before the stop, and those of a later validation record that
     starts again), ``samples`` of them, and ``undefined_from_s`` says from when."""
-    sl = prob.split.val_slice()
     stop = undefined_from(fit.Yhat, prob)
-    if stop is not None:
-        sl = defined_validation_rows(fit.Yhat, prob)
+    sl = defined_validation_rows(fit.Yhat, prob)
     r = prob.Y[sl] - fit.Yhat[sl]
     return {"params": dict(zip(fit.names, fit.theta)), "param_std": dict(zip(fit.names, fit.std)),
             # 95 % intervals θ̂ ± t_ν σ with the covariance's own degrees of freedom (fit.param_intervals)
@@ -79,7 +77,7 @@ def model_block(fit: FitResult, prob: Problem) -> dict:
                                                      "fit_percent": fit_percent(prob.Y[sl, i], fit.Yhat[sl, i])}
                                               for i, name in enumerate(prob.out_names)}}
                               if r.shape[1] > 1 else {}),
-                           **({"undefined_from_s": float(prob.t[stop]), "samples": int(len(sl))}
+                           **({"undefined_from_s": float(prob.t[stop]), "samples": len(r)}
                               if stop is not None else {})},
             "bic": bic_of(fit), "n_params": fit.n_params, "converged": fit.success,
             "identifiability": fit.identifiability.record() if fit.identifiability else None,

@@ -242,7 +242,7 @@ def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
     return r if r.shape[1] == 1 else r / output_scales(prob)
 
 
-def validation_undefined(fit: FitResult, prob: Problem, stop: int, which: str) -> stats.TestResult:
+def validation_undefined(prob: Problem, stop: int, which: str) -> stats.TestResult:
     """The failed adequacy row of a model whose free-run simulation stops on the validation part (a NaN
     or a divergence from sample ``stop``; :func:`pipeline.fit.simulate_full` with ``partial``): what the
     simulation gets wrong includes that it cannot follow the record there at all, so the model is not
@@ -1658,10 +1658,10 @@ class Diagnoser:
                 last_r2 = _family_r2(cands)
             adequacy = rows.result() + probe.result()
         nominal_adequacy = nominal_job.result()
-        for fit, rows_of in ((current, adequacy), (nominal, nominal_adequacy)):
+        for fit, rows_of, which in ((current, adequacy, "final"), (nominal, nominal_adequacy, "nominal")):
             stop = undefined_from(fit.Yhat, prob)
             if stop is not None:
-                rows_of.append(validation_undefined(fit, prob, stop, "final" if rows_of is adequacy else "nominal"))
+                rows_of.append(validation_undefined(prob, stop, which))
         if last_p:
             # a family whose added-term test is significant on the final model, yet whose extension was
             # not accepted: a direction the model misses that no family's extension explains

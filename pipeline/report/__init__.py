@@ -31,10 +31,8 @@ def _fit_rows(ctx, labels) -> list[dict]:
     es = prob.split.est_slice()
     rows = []
     for f, lab in zip(ctx.diag.fits, labels):
-        sl = prob.split.val_slice()
+        sl = defined_validation_rows(f.Yhat, prob)
         stop = undefined_from(f.Yhat, prob)
-        if stop is not None:
-            sl = defined_validation_rows(f.Yhat, prob)
         ok = len(prob.Y[sl]) > 0
         rows.append({"name": lab, "val_fit": fit_percent(prob.Y[sl], f.Yhat[sl]) if ok else None,
                      "val_rmse": rmse(prob.Y[sl] - f.Yhat[sl]) if ok else None,
