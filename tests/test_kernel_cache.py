@@ -18,7 +18,7 @@ def _kernel(folder, key: str, used_age: float | None, module_age: float, now: fl
              folder / "__pycache__" / f"k_{key}.simulate-43.py311.1.nbc",
              folder / "__pycache__" / f"k_{key}.cpython-311.pyc"]
     for f in files:
-        f.write_text("x")
+        f.write_text(kernel_cache.HEADER + " for states ['x']; do not edit\n" if f.suffix == ".py" else "x")
         os.utime(f, (now - module_age, now - module_age))
     if used_age is not None:
         u = folder / f"k_{key}.used"
@@ -38,13 +38,15 @@ def test_prune_removes_the_least_recently_used_beyond_the_cap_and_nothing_else(t
     for i, k in enumerate(keys):
         _kernel(tmp_path, k, used_age=60.0 if i == 0 else (9 - i) * day, module_age=30 * day, now=now)
     foreign = [tmp_path / "notes.txt", tmp_path / "k_short.py", tmp_path / "k_0000000000000001.py.bak",
-               tmp_path / "__pycache__" / "other.cpython-311.pyc"]
+               tmp_path / "__pycache__" / "other.cpython-311.pyc", tmp_path / "k_ffffffffffffff00.py"]
     for f in foreign:
         f.write_text("not the tool's")
+    # a module of the kernels' name that the tool did not write, the least recently used of all
+    os.utime(tmp_path / "k_ffffffffffffff00.py", (now - 90 * day, now - 90 * day))
     removed = kernel_cache.prune(tmp_path, max_kernels=3, min_age_s=3600.0, now=now)
     # oldest first: used 8, 7, 6, 5, 4 days ago; the three most recent (1 min, 1 day, 2 days) stay
     assert removed == keys[1:6]
-    assert _keys(tmp_path) == {keys[0], keys[6], keys[7]}
+    assert _keys(tmp_path) == {keys[0], keys[6], keys[7], "ffffffffffffff00"}
     left = os.listdir(tmp_path / "__pycache__")
     assert not any(k in n for n in left for k in removed)
     assert sum(keys[0] in n for n in left) == 3
