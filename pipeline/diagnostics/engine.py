@@ -20,16 +20,19 @@
    kept as information.
 4. The accepted extension with the lowest ΔBIC + 2 ln(places of its family) is the finding (a uniform
    prior over causes and, within one, over its places: :func:`choose`), ΔBIC counted with the residual's
-   effective sample size (:func:`effective_bic`); when another accepted extension is within 2 of it and
-   clearly better on the validation part, that one (:meth:`Diagnoser.separate`). The extended model
+   effective sample size (:func:`effective_bic`); when another accepted extension is within 6 of it
+   (``naming.SEPARATE_CRITERION``) and clearly better on the validation part, that one (:func:`.naming.separate`). The extended model
    becomes the model and the loop repeats, up to ``max_findings`` causes.
+
+Beside this loop: the intersample pre-stage of each round (:mod:`.intersample_stage`), the choice among
+accepted extensions and a finding's words (:mod:`.naming`), the refit criteria (:mod:`.refit_criteria`),
+the held-out gain (:mod:`.gain`) and the backward step over the chosen chain (:mod:`.revisit`).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -53,7 +56,12 @@ from .adequacy import MATERIAL_R2, adequacy_tests, feedback_tests, material, str
 from .form import Accepted, form_test
 from .hausman import NAME as HAUSMAN
 from .noise import diagnose_noise
-from .gain import gain_ci, unbounded_note
+from .console import log as _log
+from .gain import gain_ci, gain_resid, pooled, unbounded_note
+from .intersample_stage import IntersampleStage
+from .refit_criteria import bic_of, lr_against
+from . import naming
+from .naming import CONTEST_SENTENCES, RUNNER_UP_DBIC, SEPARATION_MIN_GAIN, p_text, separates
 from .state_probe import NAME as PROBE_NAME, probe_hypotheses, what as probe_what, where as probe_where
 from .pairs import Member, hidden_pairs
 from .revisit import Link, revisit
@@ -122,7 +130,7 @@ def effective_bic(weighed: list[Candidate], current: FitResult) -> float | None:
     ``current`` with the residual's effective sample size, and returns that N_eff (None when there is
     none). N_eff is taken from the accepted candidates when there are any (the choice is among them),
     else from all of them; rejected ones get the same N_eff, so that a runner-up that was not accepted
-    is listed on the finding's scale (:meth:`Diagnoser.finding`).
+    is listed on the finding's scale (:func:`.naming.finding`).
 
     ΔBIC = N ln(det Σ̂₁/det Σ̂₀) + Δk ln N counts every residual as an independent sample. An output-error
     residual with lag-1 autocorrelation ρ carries the information of N_eff = N(1 − ρ)/(1 + ρ) independent
@@ -195,51 +203,11 @@ COLOUR_TESTS = ("autocorrelation", "ljung_box", "fisher_g")   # residual tests o
 # beat the intersample choice (which adds no parameter) to be preferred: 10 is where Kass & Raftery
 # (1995, JASA 90, §3.2) put "very strong" evidence on the 2 ln B scale that a BIC difference approximates
 INTERSAMPLE_TIE_BIC = 10.0
-# the validation gain an intersample switch must reach to be named: the same 0.1 % of the residual RMS
-# below which a finer step is not even refitted (Diagnoser._intersample). Without it a finer RK4 step was
-# named on a gain of 0.009 % (significant at the one-sided 5 % level: the change is deterministic and
-# the noise small), a real but immaterial integration error
-INTERSAMPLE_MIN_GAIN = 1e-3
-# the estimation part's evidence an intersample switch needs: ΔBIC below −2, "positive" on Kass &
-# Raftery's 2 ln B scale (1995, §3.2; below 2 "not worth more than a bare mention", the engine's
-# TIE_CRITERION). The switch adds no parameter, so ΔBIC < 0 alone accepted any improvement, however
-# slight: from foh to the band-limited signal on slow plants, where the two differ by 0.1-0.2 % of the
-# validation RMSE, two null records and a wrong-order record of the independent bench's test seeds got a
-# finding at ΔBIC of -0.27 to -1.2 (the bandlimited option's bench run, BENCHMARKS.md)
-INTERSAMPLE_MAX_DBIC = -2.0
 MAX_REFITS = 4
-# the intersample stage's held-out test: one-sided, H0 "validation error not lower" (Diebold & Mariano
-# 1995) at this level (see Diagnoser._intersample)
-ONE_SIDED_LEVEL = 0.05
 # the state probe is refitted (Diagnoser.probe_refit) only when its linearised test explains at least this
 # share of the residual: half the adequacy threshold. Null records (AR(0.9) noise) stayed at 0.1-0.8 %,
 # out-of-library springs that ended ``colored_noise`` at 1.0-2.5 %; a refit costs ~0.1-0.3 s
 PROBE_REFIT_MIN_SHARE = 0.5 * MATERIAL_R2
-
-
-def _log(msg: str) -> None:
-    print(f"[diagnose] {msg}", file=sys.stderr, flush=True)
-
-
-def val_resid(fit: FitResult, prob: Problem) -> np.ndarray:
-    """(n_val, ny) free-run validation residuals, in the outputs' own units."""
-    sl = prob.split.val_slice()
-    return prob.Y[sl] - fit.Yhat[sl]
-
-
-def output_scales(prob: Problem) -> np.ndarray:
-    """Per-output scale for pooling: the standard deviation of the measured validation output (1 when
-    it is constant). Fixed by the record, so gains of different iterations are comparable."""
-    s = np.std(prob.Y[prob.split.val_slice()], axis=0)
-    return np.where(s > 0, s, 1.0)
-
-
-def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
-    """The validation residuals a gain is measured on: in the output's units for one output; for
-    several, each output divided by its scale (:func:`output_scales`), so the pooled RMSE is a
-    normalised RMSE and a position in metres is not drowned by a voltage."""
-    r = val_resid(fit, prob)
-    return r if r.shape[1] == 1 else r / output_scales(prob)
 
 
 def validation_undefined(prob: Problem, stop: int, which: str) -> stats.TestResult:
@@ -284,26 +252,6 @@ def unaccepted_fits(base: FitResult, cands: list) -> list[tuple[str, FitResult]]
     return out
 
 
-def lr_against(current: FitResult, refit: FitResult, alpha: float, searched: int = 0,
-               break_trim: float | None = None) -> stats.TestResult:
-    """The likelihood-ratio test of ``refit`` against the ``current`` model it extends, on the estimation
-    part, with the effective sample size from the **refit's** residual (:func:`stats.lr_test`: the
-    current residual carries the missing effect itself and would leave N_eff < 1 on a large smooth one).
-    ``searched``: parameters the family estimated by a search and held fixed in the refit (a jump's
-    time), counted in the degrees of freedom: a conservative stand-in for the supremum-LR law of an
-    estimated change point (Andrews 1993, Econometrica 61(4)), which is more spread than χ²₁;
-    ``break_trim``: that law itself (:func:`stats.sup_lr_break_p`) for one coefficient's jump."""
-    return stats.lr_test(current.sse_w, refit.sse_w, current.resid_est.size,
-                         refit.n_params - current.n_params + searched, stats.lag1(refit.resid_est), alpha,
-                         break_trim=break_trim)
-
-
-def _pooled(g: dict, ny: int) -> dict:
-    if ny > 1:
-        g["metric"] = "validation_nrmse_sim_pooled"
-    return g
-
-
 def rmse(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(r))))
 
@@ -311,13 +259,6 @@ def rmse(r: np.ndarray) -> float:
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
     """MATLAB ``compare`` fit: 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (free-run simulation)."""
     return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / np.linalg.norm(y - y.mean(axis=0))))
-
-
-def bic_of(fit: FitResult, searched: int = 0) -> float:
-    """BIC of the fit on the estimation part; ``searched`` parameters estimated by a search and held
-    fixed in the refit (a jump's time) count like the fitted ones (Schwarz 1978: k is every estimated
-    parameter; uncounted, a jump at a searched time beat a drift with as many fitted parameters)."""
-    return criteria.bic(fit.resid_est, fit.n_params + searched)
 
 
 def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[stats.TestResult], float]:
@@ -358,12 +299,6 @@ def strongest_fisher(tests: list[stats.TestResult]) -> stats.TestResult:
     return min((t for t in tests if t.name.startswith("fisher_g")), key=lambda t: t.p_value)
 
 
-def _p_text(p: float) -> str:
-    """"= 0.0123", or "< 1e-16" where the χ² tail is below double precision's resolution near 1 (it
-    underflows to 0 in the summary; "p = 0" would claim certainty)."""
-    return f"= {p:.3g}" if p >= 1e-16 else "< 1e-16"
-
-
 def _share(w: stats.WaldResult) -> float:
     """The share of the residual's sum of squares an added-term test's columns remove by least squares
     on the *unfiltered* residual: the linearised refit's SSE drop (a Gauss–Newton step). Not the GLS
@@ -381,7 +316,7 @@ class Diagnoser:
         self.dt = dt
         self.max_delay = max_delay_s if max_delay_s is not None else 20 * dt
         self.w = prob.weights
-        self._intersample_dropped: set[str] = set()
+        self.inter = IntersampleStage(prob, alpha=alpha, n_boot=n_boot, dt=dt)
         self._probe_best: dict[int, tuple] = {}   # id(fit) -> (fit, probe hypothesis, its test): state_probe
         self._basis_cache: dict[int, tuple] = {}   # id(fit) -> (fit, its Jacobian's column basis): _basis
         self._basis_lock = threading.Lock()
@@ -395,16 +330,6 @@ class Diagnoser:
         # the last candidates() round's (fit, context, [(representative, sensitivities, multiplicity)]),
         # for the test of one hypothesis given another, for causes that hide each other (_pair_first)
         self._members: tuple | None = None
-
-    def _sim_change(self, fit: FitResult, alt: Model) -> float | None:
-        """RMS change of the estimation-part simulation under ``alt`` (same parameters), relative to
-        the residual RMS; None if it cannot be simulated."""
-        Y = self._sim_est(alt, fit.x0)
-        if Y is None:
-            return None
-        base = fit.Yhat[self.prob.split.est[0]:self.prob.split.est[1]]
-        r = float(np.sqrt(np.mean(fit.resid_est ** 2))) or 1.0
-        return float(np.sqrt(np.mean((Y - base) ** 2))) / r
 
     # -- sensitivities -------------------------------------------------------------------------
     def _sim_est(self, model: Model, x0: np.ndarray) -> np.ndarray | None:
@@ -799,7 +724,7 @@ class Diagnoser:
         """``fit``'s held-out gain over ``base`` (whose validation residuals are ``before``), pooled over
         outputs, its likelihood-ratio test against ``base`` with the effective sample size, and the rule
         that accepts an extension: the gain's 95 % lower bound above 0 and LR p below α."""
-        g = _pooled(gain_ci(before, gain_resid(fit, self.prob), rng, self.n_boot), before.shape[1])
+        g = pooled(gain_ci(before, gain_resid(fit, self.prob), rng, self.n_boot), before.shape[1])
         lr = lr_against(base, fit, self.alpha, searched)
         return g, lr, g["ci95"][0] > 0 and lr.p_value < self.alpha
 
@@ -1167,163 +1092,6 @@ class Diagnoser:
                 c.reason = "not refitted: its family's representative was not refitted"
         return always + [c for c in todo if id(c) in kept] + [c for c in seconds if c.hyp.family in fams]
 
-    def _intersample(self, nominal: FitResult, rng) -> tuple[FitResult, dict | None, dict]:
-        """The ``intersample`` pre-stage (see :mod:`.families.intersample`). An alternative rejected
-        with a clearly negative gain (95 % upper bound below 0) is not retried in later iterations,
-        and a finer step that changes the current simulation by less than 0.1 % of the residual RMS
-        is not refitted (the integration is already accurate).
-
-        Acceptance: ΔBIC < ``INTERSAMPLE_MAX_DBIC`` (−2) on the estimation part, a validation gain of at least ``INTERSAMPLE_MIN_GAIN``
-        (0.1 %), and the validation error lower at the one-sided 5 %
-        level (``gain.p_not_lower`` < ``ONE_SIDED_LEVEL``), where a physical extension needs the two-sided 95 %
-        interval above 0, a one-sided 2.5 % test. The choice here adds no parameter: it is between two
-        models of equal size, one of which the estimation data already prefer, so the held-out test
-        checks a direction fixed beforehand (H0: gain ≤ 0) and has no flexible term's partial fit of an
-        unrelated misfit to guard against (the reason the stricter level is kept for added terms: with
-        the one-sided level for every family, x·exp(−x²) records of the independent bench got a tanh
-        and an x³ term accepted at gains whose two-sided interval contained 0; BENCHMARKS.md). Measured on
-        the independent bench (tests/diagnosis/test_intersample_one_sided.py): at 10 % noise a correct
-        switch gains about 2 % of the validation RMSE, and its two-sided interval reached just below 0."""
-        fam = REGISTRY["intersample"]
-        rows, best, passed = [], None, []
-        for chosen, alt in fam.alternatives(nominal.model):
-            if chosen in self._intersample_dropped:
-                continue
-            if chosen.startswith("substeps"):
-                change = self._sim_change(nominal, alt)
-                if change is not None and change < 1e-3:
-                    rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
-                                 "reason": f"not refitted: a finer step changes the simulation by "
-                                           f"{100 * change:.2g} % of the residual RMS"})
-                    continue
-            try:
-                f = fit_output_error(alt, self.prob, start=dict(zip(nominal.names, nominal.theta)))
-            except InputError as exc:
-                rows.append({"family": "intersample", "hypothesis": chosen, "accepted": False,
-                             "reason": f"refit failed: {exc}"})
-                continue
-            g, dbic = self.switch_gain(nominal, f, rng)
-            lr = lr_against(nominal, f, self.alpha)
-            # no parameter is added (q = 0): the likelihood-ratio row only says that the weighted SSE fell;
-            # the estimation-part criterion for equal parameter counts is ΔBIC < 0, the same BIC (log det
-            # of the residual covariance) the choice is ranked by below. With several outputs the two can
-            # disagree: an alternative with ΔBIC = +0.8 was accepted, and named, on a two-output record.
-            # the held-out test is one-sided at 5 % (docstring); an extension that adds parameters needs
-            # the two-sided 95 % interval's lower end above 0
-            material_gain = g["relative"] >= INTERSAMPLE_MIN_GAIN
-            ok = (g["p_not_lower"] < ONE_SIDED_LEVEL and lr.p_value < self.alpha and dbic < INTERSAMPLE_MAX_DBIC
-                  and material_gain)
-            if g["ci95"][1] < 0:
-                self._intersample_dropped.add(chosen)
-            if ok:
-                reason = "accepted"
-            elif g["p_not_lower"] >= ONE_SIDED_LEVEL:
-                reason = (f"validation error not lower at the one-sided 5 % level "
-                          f"(p = {g['p_not_lower']:.3g})" + unbounded_note(g))
-            elif lr.p_value >= self.alpha:
-                reason = (f"estimation fit not better by the likelihood-ratio test with the effective sample "
-                          f"size (p = {lr.p_value:.3g}; {lr.detail})")
-            elif dbic >= INTERSAMPLE_MAX_DBIC:
-                reason = (f"estimation BIC not lower by more than {-INTERSAMPLE_MAX_DBIC:g} (ΔBIC = {dbic:+.3g}; "
-                          "no parameter is added)")
-            else:
-                reason = (f"validation gain {100 * g['relative']:.2g} %, under the {100 * INTERSAMPLE_MIN_GAIN:g} % "
-                          f"a switch must explain to be named")
-            rows.append({"family": "intersample", "hypothesis": chosen, "gain": g, "delta_bic": dbic, "accepted": ok,
-                         "reason": reason, "p_family": None, "statistic": None})
-            _log(f"  intersample {chosen}: gain {g['relative']:+.3f} ci {g['ci95'][0]:+.3f}..{g['ci95'][1]:+.3f}, "
-                 f"dBIC {dbic:+.1f}")
-            if ok:
-                passed.append((chosen, f, dbic, g))
-            if ok and (best is None or dbic < best[2]):
-                best = (chosen, f, dbic, g)
-        hist = {"stage": "intersample", "candidates": rows}
-        if best is None:
-            return nominal, None, hist
-        chosen, f, dbic, g = best
-        return f, self.switch_finding(nominal, chosen, f, dbic, g, passed), hist
-
-    def switch_gain(self, base: FitResult, f: FitResult, rng) -> tuple[dict, float]:
-        """An intersample switch's validation gain over ``base`` (one-sided, as the stage tests it) and
-        its estimation ΔBIC (:meth:`_intersample`)."""
-        before = gain_resid(base, self.prob)
-        g = _pooled(gain_ci(before, gain_resid(f, self.prob), rng, self.n_boot, one_sided=True), before.shape[1])
-        return g, bic_of(f) - bic_of(base)
-
-    def switch_finding(self, base: FitResult, chosen: str, f: FitResult, dbic: float, g: dict,
-                       passed: list | tuple = ()) -> dict:
-        """The finding of a switch from ``base``'s intersample to ``chosen`` (fit ``f``; its gain ``g`` and
-        ΔBIC over ``base``): the sentence, the twin runner-up (:meth:`_intersample_equivalent`) and the
-        other accepted choices within ``TIE_CRITERION`` (``passed``: (choice, fit, ΔBIC, gain) rows)."""
-        before, bic0 = gain_resid(base, self.prob), bic_of(base)
-        key, subject = REGISTRY["intersample"].describe_choice(base.model, chosen)
-        runners, same = self._intersample_equivalent(base, chosen, f, dbic, g, before, bic0)
-        # another accepted choice within TIE_CRITERION BIC units: the estimation part does not separate them
-        # (a multisine through a slow plant: foh and the band-limited signal 0.6 BIC units apart)
-        tied = [(c2, g2, d2) for c2, _, d2, g2 in passed if c2 != chosen and d2 - dbic < self.TIE_CRITERION]
-        for c2, g2, d2 in tied:
-            runners.append(_runner_row("intersample", c2, True, d2, g2,
-                                       f"accepted as well: BIC {d2 - dbic:.1f} higher than the finding's, within "
-                                       f"{self.TIE_CRITERION:g}; validation gain {100 * g2['relative']:.1f} % vs "
-                                       f"{100 * g['relative']:.1f} %"))
-        if tied:
-            same += (" " + ", ".join(c2 for c2, _, _ in tied) + f" fits as well (BIC within {self.TIE_CRITERION:g} "
-                     f"units; validation RMSE " + ", ".join(f"{g2['after']:.4g}" for _, g2, _ in tied)
-                     + f" against {g['after']:.4g}): these data do not separate them.")
-        finding = {"family": "intersample", **key,
-                   "description": f"{subject} {self._gain_text(g, dbic)}.{same}", "evidence": [
-                       # the one-sided p that the validation error is not lower: the test the choice is accepted by
-                       {"test": "held_out_gain", "statistic": g["relative"], "p_value": g.get("p_not_lower"),
-                        "ci95": g["ci95"]}],
-                   "gain": g, "delta_bic": dbic, "extended_equations": f.model.describe_equations(),
-                   "runners_up": runners}
-        return finding
-
-    def _intersample_equivalent(self, nominal: FitResult, chosen: str, f: FitResult, dbic: float, g: dict,
-                                before: np.ndarray, bic0: float) -> tuple[list[dict], str]:
-        """The accepted switch's physical twin (``Intersample.equivalent``: the configured foh with half a
-        sample more input dead time, for a switch to zoh) refitted and compared on the validation part: a
-        runner-up row, and a sentence for the description when the data cannot tell them apart (the
-        validation RMSEs differ by less than ``SEPARATION_MIN_GAIN`` or the interval of their ratio
-        contains 0). The switch stays the finding: it adds nothing to the model."""
-        twin = REGISTRY["intersample"].equivalent(nominal.model, chosen, self.dt)
-        if twin is None:
-            return [], ""
-        try:
-            h = fit_output_error(twin, self.prob, start=dict(zip(nominal.names, nominal.theta)))
-        except (InputError, np.linalg.LinAlgError, ArithmeticError):     # no twin to show, not fatal
-            return [], ""
-        gh = _pooled(gain_ci(before, gain_resid(h, self.prob)), before.shape[1])
-        dbic_h = bic_of(h) - bic0
-        sep = gain_ci(gain_resid(f, self.prob), gain_resid(h, self.prob))   # 1 − RMSE_twin / RMSE_switch
-        alike = (sep["ci95"][0] <= 0 <= sep["ci95"][1]) or abs(sep["relative"]) < self.SEPARATION_MIN_GAIN
-        half = self.dt / 2
-        row = _runner_row(
-            "input_delay", f"input_delay +{half:.4g} s with {nominal.model.intersample}", False, dbic_h, gh,
-            f"the configured {nominal.model.intersample} with an input dead time of half a sample more: BIC "
-            f"{abs(dbic_h - dbic):.1f} {'higher' if dbic_h >= dbic else 'lower'} than the switch's; validation gain "
-            f"{100 * gh['relative']:.1f} % vs {100 * g['relative']:.1f} % (validation RMSE "
-            f"{100 * abs(sep['relative']):.2f} % {'lower' if sep['relative'] >= 0 else 'higher'} than the switch's; "
-            f"95 % interval of 1 − the ratio {100 * sep['ci95'][0]:+.2f} to {100 * sep['ci95'][1]:+.2f} %)")
-        same = (f" On this record the configured {nominal.model.intersample} with an input dead time of half a "
-                f"sample more ({half:.4g} s) fits as well (validation RMSE {gh['after']:.4g} against "
-                f"{g['after']:.4g}): these data cannot tell a held input from a half-sample dead time."
-                if alike else "")
-        return [row], same
-
-    @staticmethod
-    def _gain_text(g: dict, dbic: float) -> str:
-        what = ("pooled normalised validation free-run RMSE (each output over its standard deviation)"
-                if g.get("metric") == "validation_nrmse_sim_pooled" else "validation free-run RMSE")
-        def pct(x: float) -> str:   # -5e-6 read "-0.0": a sign with no digit to carry it
-            v = 100 * x
-            return f"{v:.2g}" if 0 < abs(v) < 0.05 else f"{v:.1f}"
-        return (f"lowers the {what} from {g['before']:.4g} to {g['after']:.4g} "
-                f"({pct(g['relative'])} % better, 95 % CI {pct(g['ci95'][0])} to "
-                f"{pct(g['ci95'][1])} % on this validation input"
-                + (f"; one-sided p = {g['p_not_lower']:.2g} that it is not lower"
-                   if "p_not_lower" in g else "") + f") and BIC by {-dbic:.1f}")
-
     def run(self, model: Model, start: dict | None = None) -> Diagnosis:
         """The diagnosis loop (module docstring). The hypotheses' tests and refits run in threads (the
         kernel releases the GIL), so BLAS runs one thread per call meanwhile: with OpenBLAS's own
@@ -1422,7 +1190,7 @@ class Diagnoser:
             jobs = {id(c): submit(c) for c in todo if c.hyp.extra_states}
             if not switched:
                 _log("  intersample: the current model with the other input interpolation and a finer step")
-                inter_job = pool.submit(self._intersample, current,
+                inter_job = pool.submit(self.inter.run, current,
                                         np.random.default_rng([self.seed, 1000 + it]))
             jobs.update({id(c): submit(c) for c in todo if id(c) not in jobs})
             for c in todo:
@@ -1512,7 +1280,7 @@ class Diagnoser:
                                    np.random.default_rng([self.seed, it, 1]))
         worth = (f"given {second.hyp.key}, its validation gain is {100 * g['relative']:+.1f} % "
                  f"(95 % interval {100 * g['ci95'][0]:+.1f} to {100 * g['ci95'][1]:+.1f} %; likelihood-ratio "
-                 f"p {_p_text(lr.p_value)})")
+                 f"p {p_text(lr.p_value)})")
         _log(f"  look-ahead: {second.hyp.key} accepted on top; {first.hyp.key} {worth}")
         if not ok:
             first.reason += f"; {LOOKED_AHEAD}{worth}, not significantly better"
@@ -1551,7 +1319,7 @@ class Diagnoser:
             a, b = chosen[pair.a], chosen[pair.b]
             if any(c is a for c in starts):
                 continue
-            _log(f"  nothing accepted, but {b.hyp.key} given {a.hyp.key} is significant (p {_p_text(pair.p_value)})")
+            _log(f"  nothing accepted, but {b.hyp.key} given {a.hyp.key} is significant (p {p_text(pair.p_value)})")
             a.evidence = a.evidence + [{
                 "test": f"pair_wald[{b.hyp.key}|{a.hyp.key}]", "statistic": pair.wald.statistic,
                 "p_value": pair.p_value, "dof": pair.wald.dof, "detail": pair.detail(members)}]
@@ -1620,13 +1388,13 @@ class Diagnoser:
                 first, first_fit, best, rnd2 = ahead
                 history.append(rnd2.record(it + 1))
                 last_round = (first_fit, rnd2.cands)
-                findings.append(self.finding(first, [c for c in cands if c is not first and c.gain is not None
+                findings.append(naming.finding(self.prob, self.dt, first, [c for c in cands if c is not first and c.gain is not None
                                                      and c.delta_bic_eff is not None]))
                 links.append(Link("look-ahead", current, first_fit, first, self._alternatives(first, cands)))
                 current = first_fit
                 cands = rnd2.cands
                 done_until = it + 2
-            findings.append(self.finding(best, [c for c in cands if c is not best and c.gain is not None
+            findings.append(naming.finding(self.prob, self.dt, best, [c for c in cands if c is not best and c.gain is not None
                                                 and c.delta_bic_eff is not None]))
             if done_until != it + 2:
                 history[-1] = self._not_taken(rnd, it, best.hyp.key)
@@ -1799,6 +1567,13 @@ class Diagnoser:
                 row["reason"] = why
         return rnd.record(it)
 
+    def separate(self, best: Candidate | None, accepted: list[Candidate]) -> Candidate | None:
+        """:func:`.naming.separate` on this record; a replacement is logged."""
+        c = naming.separate(self.prob, best, accepted)
+        if c is not best:
+            _log(f"  {c.hyp.key} {c.separation}")
+        return c
+
     def inter_wins(self, inter: tuple, best: Candidate | None, n_eff: float | None, current: FitResult) -> bool:
         """Is the intersample switch (``inter``: its fit and finding) chosen over the round's best physical
         cause? Yes unless the cause's ΔBIC is lower by ``INTERSAMPLE_TIE_BIC``; and also when it is so
@@ -1826,14 +1601,14 @@ class Diagnoser:
         if d_eff >= best_eff + INTERSAMPLE_TIE_BIC or best.fit is None:
             return False
         g = gain_ci(gain_resid(f_is, self.prob), gain_resid(best.fit, self.prob))   # 1 − RMSE_cause/RMSE_switch
-        return not separates(g, self.SEPARATION_MIN_GAIN)
+        return not separates(g, SEPARATION_MIN_GAIN)
 
     def _alternatives(self, c: Candidate, cands: list[Candidate]) -> list[Candidate]:
         """The refitted candidates of ``c``'s round from other families within ``RUNNER_UP_DBIC`` of it: what
         the backward step (:mod:`.revisit`) may put in its place."""
         return [o for o in cands if o is not c and o.fit is not None and o.gain is not None
                 and o.delta_bic_eff is not None and c.delta_bic_eff is not None and o.hyp.family != c.hyp.family
-                and o.criterion - c.criterion <= self.RUNNER_UP_DBIC]
+                and o.criterion - c.criterion <= RUNNER_UP_DBIC]
 
     # a finding's keys that describe how its own forward round weighed it against the others
     FORWARD_ROUND_KEYS = ("selection", "runners_up", "tied_with", "disputed_by")
@@ -1854,8 +1629,8 @@ class Diagnoser:
                 out.append(findings[k])
             elif link.cand is None:         # a switch the backward step put in (revisit.to_switch)
                 chosen = link.after.model.intersample
-                g, dbic = self.switch_gain(link.before, link.after, np.random.default_rng([self.seed, 7400]))
-                f = self.switch_finding(link.before, chosen, link.after, dbic, g)
+                g, dbic = self.inter.switch_gain(link.before, link.after, np.random.default_rng([self.seed, 7400]))
+                f = self.inter.switch_finding(link.before, chosen, link.after, dbic, g)
                 move = next((m for m in moves if m["replaced_by"] == f"intersample:{chosen}"), None)
                 if move is not None:
                     f["revisit"] = move["detail"]
@@ -1867,7 +1642,7 @@ class Diagnoser:
                 f["description"] += f" Backward step: {f['revisit']}."
                 out.append(f)
             else:
-                f = self.finding(link.cand, [])
+                f = naming.finding(self.prob, self.dt, link.cand, [])
                 move = next((m for m in moves if m["replaced_by"] == link.cand.hyp.key), None)
                 if move is not None:
                     f["revisit"] = move["detail"]
@@ -1882,9 +1657,6 @@ class Diagnoser:
                 out.append(f)
         return out
 
-    # the sentences of a finding's description on ties and disputes start with these (:meth:`finding`)
-    CONTEST_SENTENCES = (" These data cannot tell it from", " The two parts of the record disagree")
-
     def _forward_round(self, f: dict, before: dict | None) -> str:
         """Copies into the refitted finding ``f`` what its forward-round finding ``before`` said about the
         other causes (``FORWARD_ROUND_KEYS``, where ``f`` has none of its own), and returns the forward
@@ -1897,204 +1669,8 @@ class Diagnoser:
         if carried:
             f["forward_round"] = carried
         desc = before.get("description", "")
-        at = [desc.find(m) for m in self.CONTEST_SENTENCES if m in desc]
+        at = [desc.find(m) for m in CONTEST_SENTENCES if m in desc]
         return f" In its forward round:{desc[min(at):]}" if at else ""
-
-    TIE_CRITERION = 2.0   # criterion units within which the estimation part cannot separate two causes
-    SEPARATION_MIN_GAIN = 0.01   # and the validation error by which the other must then be lower
-    # criterion units below which the validation part, when it clearly prefers another accepted extension,
-    # decides (Diagnoser.separate): 6 is where Kass & Raftery (1995 §3.2) end "positive" evidence
-    SEPARATE_CRITERION = 6.0
-
-    def separate(self, best: Candidate | None, accepted: list[Candidate]) -> Candidate | None:
-        """The finding when the estimation part gives the chosen extension no more than "positive" evidence
-        over another: an accepted extension whose criterion (effective ΔBIC + prior, :func:`choose`) is
-        within ``SEPARATE_CRITERION`` of the chosen one's (6: up to "positive", Kass & Raftery 1995 §3.2;
-        within ``TIE_CRITERION``, 2, "not worth more than a bare mention", the estimation part cannot
-        separate them at all) replaces it when the validation part prefers it clearly: its validation error lower than the
-        chosen one's with the 95 % interval of the relative gain above 0 (:func:`gain_ci`, the chosen
-        extension as the "before" model: the standard any extension is accepted by) and by at least
-        ``SEPARATION_MIN_GAIN`` (1 %; a lag preferred to a delay by 0.1 % of the validation error, significant
-        on a 10 %-noise record because the difference is deterministic, is no evidence of the cause). Of
-        several, the one with the largest gain over it. Otherwise the estimation choice stands (and the
-        other is listed as a runner-up).
-
-        The validation part then serves twice, to choose between two extensions that both passed every
-        test and to measure the finding's gain; the choice is only between near-equals, and only on a
-        clear difference. Why: on an independent-bench record of a stiffness drift on a mass-spring-damper
-        (AR(1) noise φ = 0.9, 10 % noise, tuning seed 1) a jump of k at 18.1 s fitted the estimation part
-        85 BIC units better than the drift (1.4 with the effective sample size, :func:`effective_bic`) and
-        was named; the drift's validation error is 43 % lower than the jump's (interval 34 to 51 %). Not
-        every near-tie separates: a 3.6-sample input delay and a first-order lag at φ = 0.9 (0.3
-        effective units apart) differ by 12 % on the validation part, inside its interval, and the lag
-        stays the finding with the delay as its runner-up. Why up to 6 and not 2: on a two-cause record made by
-        ``solve_ivp`` (a 5-sample input delay and a force offset, ``pipeline.bench.two_causes`` seed 2013)
-        a first-order lag was 3.7 criterion units ahead of the delay and was named, although the delay's
-        validation error was 13 % lower (interval 10 to 15 %); the lag and a switch to zoh then stood in
-        for the delay."""
-        if best is None or best.gain is None:
-            return best
-        ties = [c for c in accepted if c is not best and c.gain is not None and c.fit is not None
-                and c.criterion - best.criterion < self.SEPARATE_CRITERION]
-        if not ties:
-            return best
-        base = gain_resid(best.fit, self.prob)
-        better = []
-        for c in ties:
-            g = gain_ci(base, gain_resid(c.fit, self.prob))
-            if separates(g, self.SEPARATION_MIN_GAIN):
-                better.append((g["relative"], c, g))
-        if not better:
-            return best
-        _, c, g = max(better, key=lambda x: x[0])
-        gap = c.criterion - best.criterion
-        why = ("which the estimation part could not separate from it" if gap < self.TIE_CRITERION else
-               f"which the estimation part preferred by {gap:.1f} criterion units, below {self.SEPARATE_CRITERION:g} "
-               "(no more than positive evidence)")
-        c.separation = (f"preferred to {best.hyp.key}, {why} "
-                        f"(criterion {best.criterion - c.criterion:+.1f}): validation error "
-                        f"{100 * g['relative']:.1f} % lower (95 % interval {100 * g['ci95'][0]:.1f} to "
-                        f"{100 * g['ci95'][1]:.1f} %)")
-        _log(f"  {c.hyp.key} {c.separation}")
-        return c
-
-    def _unresolved_ties(self, c: Candidate, others: list[Candidate]) -> list[dict]:
-        """The accepted extensions of other families that neither the estimation part nor the validation
-        part separates from ``c``: a criterion within ``TIE_CRITERION`` of ``c``'s and a validation error
-        that is not clearly lower on either side (the rule of :meth:`separate`: the 95 % interval of the
-        relative gain above 0 and at least ``SEPARATION_MIN_GAIN``). ``c`` is then named by the lower
-        criterion alone, and the finding says so. On an independent-bench record of a 1.4-sample input
-        delay in a pendulum (held input, 10 % AR(0.5) noise, tuning seed 0) a first-order lag of 1.2
-        samples and the delay were 0.01 criterion units apart, with validation errors 0.03237 and 0.03233."""
-        out = []
-        for o, gap, g, mine, theirs in self._other_families(c, others, lambda gap: abs(gap) < self.TIE_CRITERION):
-            if separates(g, self.SEPARATION_MIN_GAIN) or separates(gain_ci(theirs, mine), self.SEPARATION_MIN_GAIN):
-                continue
-            out.append(_tie_row(o, gap, g))
-        return out
-
-    def _other_families(self, c: Candidate, others: list[Candidate], within):
-        """The accepted, refitted extensions of other families than ``c``'s whose criterion gap to ``c``
-        (theirs − c's) satisfies ``within``, in criterion order, each with the gap, the relative gain
-        ``g`` = 1 − RMSE_o / RMSE_c on the validation part and both validation residuals (what
-        :meth:`_unresolved_ties` and :meth:`_disputed` judge)."""
-        if c.fit is None or c.gain is None:
-            return
-        mine = gain_resid(c.fit, self.prob)
-        for o in sorted(others, key=lambda o: o.criterion):
-            gap = o.criterion - c.criterion
-            if (not o.accepted or o.fit is None or o.gain is None or o.hyp.family == c.hyp.family
-                    or not within(gap)):
-                continue
-            theirs = gain_resid(o.fit, self.prob)
-            yield o, gap, gain_ci(mine, theirs), mine, theirs
-
-    def _disputed(self, c: Candidate, others: list[Candidate]) -> list[dict]:
-        """Accepted extensions of other families that the estimation part ranks behind ``c`` by
-        ``SEPARATE_CRITERION`` or more (so :meth:`separate` does not weigh the validation part) but at most
-        ``RUNNER_UP_DBIC``, and whose validation error is clearly lower than ``c``'s (the rule of
-        :meth:`separate`). The choice stands (the estimation part decides from "strong" evidence on); the finding says
-        that the record's two parts disagree."""
-        within = lambda gap: self.SEPARATE_CRITERION <= gap <= self.RUNNER_UP_DBIC  # noqa: E731
-        return [_tie_row(o, gap, g) for o, gap, g, _, _ in self._other_families(c, others, within)
-                if separates(g, self.SEPARATION_MIN_GAIN)]
-
-    # refitted alternatives within this criterion of the finding's are listed with it, accepted or not (an
-    # offset in the force equation whose gain interval reached below 0 beside an accepted sensor offset)
-    RUNNER_UP_DBIC = 10.0
-
-    def finding(self, c: Candidate, others: list[Candidate] | None = None) -> dict:
-        h, fit = c.hyp, c.fit
-        # accepted by the look-ahead: its parameters as estimated with the other extension in the model
-        # (alone, the current parameters absorb most of it: the coefficient of v·|v| was −0.16 without the
-        # Coulomb friction and −1.01 with it, the truth −1.0)
-        est = c.given["fit"] if c.given is not None and c.given.get("fit") is not None else fit
-        val = dict(zip(est.names, est.theta))
-        sd = dict(zip(est.names, est.std))
-        key, subject = REGISTRY[h.family].describe(h, est, val, sd)
-        f: dict = {"family": h.family, **key}
-        if h.family == "input_delay":
-            f["delay_samples"] = f["delay_s"] / self.dt
-        g = c.gain
-        desc = f"{subject} {self._gain_text(g, c.delta_bic)}."
-        runners = []
-        for o in sorted(others or [], key=lambda o: o.criterion):
-            if o.criterion - c.criterion <= self.RUNNER_UP_DBIC:
-                d_raw = o.delta_bic - c.delta_bic
-                eff = ("" if o.delta_bic_eff is None or c.delta_bic_eff is None else
-                       f"; {abs(o.delta_bic_eff - c.delta_bic_eff):.1f} "
-                       f"{'higher' if o.delta_bic_eff >= c.delta_bic_eff else 'lower'} with the residual's "
-                       f"effective sample size")
-                dc = o.criterion - c.criterion
-                prior = ("" if o.places == c.places else
-                         f"; with the model prior's 2 ln(places) ({o.places} vs {c.places} places) "
-                         f"{abs(dc):.1f} {'higher' if dc >= 0 else 'lower'}")
-                status = "" if o.accepted else f"not accepted ({o.reason}); "
-                runners.append(_runner_row(
-                    o.hyp.family, o.hyp.key, o.accepted, o.delta_bic, o.gain,
-                    f"{status}BIC {abs(d_raw):.1f} {'higher' if d_raw >= 0 else 'lower'} than the finding's{eff}"
-                    f"{prior}; validation gain {100 * o.gain['relative']:.1f} % vs {100 * g['relative']:.1f} %",
-                    o.delta_bic_eff, o.prior_penalty))
-        if c.separation:
-            f["selection"] = c.separation
-        tied = [] if c.separation else self._unresolved_ties(c, others or [])
-        tie_text = ""
-        if tied:
-            f["tied_with"] = tied
-            tie_text = (" These data cannot tell it from " + "; nor from ".join(
-                f"{t['hypothesis']} (criterion {t['criterion_gap']:+.1f}, within {self.TIE_CRITERION:g}; validation "
-                f"free-run RMSE {t['validation_rmse']:.4g} against {g['after']:.4g}, 95 % interval of the relative "
-                f"difference {100 * t['ci95'][0]:+.1f} to {100 * t['ci95'][1]:+.1f} %)" for t in tied)
-                + ": it is named by its lower criterion alone, not because the record separates them.")
-        disputed = [] if c.separation else self._disputed(c, others or [])
-        if disputed:
-            f["disputed_by"] = disputed
-            tie_text += (" The two parts of the record disagree: the validation part prefers " + "; and ".join(
-                f"{t['hypothesis']} (validation free-run RMSE {t['validation_rmse']:.4g} against {g['after']:.4g}, "
-                f"{100 * t['relative']:.1f} % lower, 95 % interval {100 * t['ci95'][0]:.1f} to {100 * t['ci95'][1]:.1f} %), "
-                f"which the estimation part ranks {t['criterion_gap']:.1f} criterion units behind" for t in disputed)
-                + ", so this record does not establish which of them it is.")
-        if c.given is not None:
-            gg, w = c.given["gain"], c.given["with"]
-            their = "their " if ", " in w else f"{w}'s "
-            desc = (f"{subject} (estimated with {w} in the model). With {w} in the model too, it lowers the "
-                    f"validation free-run RMSE by {100 * gg['relative']:.1f} % (95 % CI {100 * gg['ci95'][0]:.1f} to "
-                    f"{100 * gg['ci95'][1]:.1f} %; likelihood-ratio p {_p_text(c.given['lr_p_value'])}). Alone "
-                    f"(refitted without {w}) it changes the validation free-run RMSE from {g['before']:.4g} to "
-                    f"{g['after']:.4g} ({abs(100 * g['relative']):.1f} % {'lower' if g['relative'] >= 0 else 'higher'}; "
-                    f"95 % CI of the gain {100 * g['ci95'][0]:+.1f} to "
-                    f"{100 * g['ci95'][1]:+.1f} %)" + (f", an interval not above 0: {their}misfit was still in the "
-                                                        "validation residual." if g['ci95'][0] <= 0 else "."))
-            pair = next((e for e in c.evidence if e["test"].startswith("pair_wald[")), None)
-            if pair is not None:
-                other = pair["test"][len("pair_wald["):].split("|", 1)[0]
-                desc += (f" The look-ahead started from it because {other}'s added-term test given it was significant "
-                         f"(p {_p_text(pair['p_value'])}, Bonferroni over the round's ordered hypothesis pairs): "
-                         "the two hide each other.")
-            f["gain_given"] = {"with": w, **gg, "lr_p_value": c.given["lr_p_value"]}
-        f.update(description=desc + tie_text, evidence=c.evidence, gain=g, delta_bic=c.delta_bic, delta_bic_eff=c.delta_bic_eff,
-                 prior_penalty=c.prior_penalty,
-                 extended_equations=fit.model.describe_equations(), runners_up=runners)
-        return f
-
-
-def separates(g: dict, min_gain: float) -> bool:
-    """The validation part clearly prefers the "after" model of gain ``g`` (:func:`gain_ci`): the 95 %
-    interval of the relative gain above 0 and the gain at least ``min_gain`` (:meth:`Diagnoser.separate`,
-    whose rule the intersample margin and the stated ties use too)."""
-    return g["ci95"][0] > 0 and g["relative"] >= min_gain
-
-
-def _tie_row(o, gap: float, g: dict) -> dict:
-    return {"family": o.hyp.family, "hypothesis": o.hyp.key, "criterion_gap": gap,
-            "validation_rmse": o.gain["after"], "relative": g["relative"], "ci95": g["ci95"]}
-
-
-def _runner_row(family: str, hypothesis: str, accepted: bool, delta_bic: float, gain: dict, separation: str,
-                delta_bic_eff: float | None = None, prior_penalty: float | None = None) -> dict:
-    """A finding's ``runners_up`` row: an alternative, its criterion and gain, and what separates it."""
-    return {"family": family, "hypothesis": hypothesis, "accepted": accepted, "delta_bic": delta_bic,
-            "delta_bic_eff": delta_bic_eff, "prior_penalty": prior_penalty, "gain": gain, "separation": separation}
 
 
 def _wald_evidence(h: Hypothesis, w: stats.WaldResult) -> dict:

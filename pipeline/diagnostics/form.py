@@ -4,7 +4,7 @@ The static families name a *form*: ``cubic_stiffness`` is k3·x³, ``static_nonl
 library (tanh(x/L), x·|x|, √x, x², …). When the loop accepts a library term and then, in a later round,
 another static term in the **same state and the same equation**, the data have rejected the first form
 for that nonlinearity: the later extension was accepted against the model holding the first one by the
-held-out gain test and the likelihood-ratio test (:func:`..engine.lr_against`, effective sample size).
+held-out gain test and the likelihood-ratio test (:func:`.refit_criteria.lr_against`, effective sample size).
 That is a test of "the nonlinearity in x is f₁(x)" at level α, and the sum the loop built (tanh + x³ +
 x·|x| for a softening-then-reversing spring x·exp(−x²/x₀²)) is a series approximation of an unknown
 function, not two or three causes. A careful analyst would write "a nonlinearity in x of a form the

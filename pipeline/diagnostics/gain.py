@@ -44,11 +44,15 @@ rate is 1.0–2.2 %, and the one-sided test's size at a gain of 0 is checked in 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import stats as sps
 
 from .. import hac
+
+if TYPE_CHECKING:
+    from ..fit import FitResult, Problem
 
 L_CLIP = math.log(100.0)
 CI_MEANING = ("for this validation input: the interval is the sampling uncertainty of the noise on the "
@@ -141,6 +145,34 @@ def unbounded_note(g: dict) -> str:
         return ""
     return (f" (the interval is unbounded below: ν = {dof:.2g} degrees of freedom; the validation residuals "
             f"are too smooth for this record to bound the gain, whose point value is {100 * g['relative']:+.1f} %)")
+
+
+def val_resid(fit: FitResult, prob: Problem) -> np.ndarray:
+    """(n_val, ny) free-run validation residuals, in the outputs' own units."""
+    sl = prob.split.val_slice()
+    return prob.Y[sl] - fit.Yhat[sl]
+
+
+def output_scales(prob: Problem) -> np.ndarray:
+    """Per-output scale for pooling: the standard deviation of the measured validation output (1 when
+    it is constant). Fixed by the record, so gains of different iterations are comparable."""
+    s = np.std(prob.Y[prob.split.val_slice()], axis=0)
+    return np.where(s > 0, s, 1.0)
+
+
+def gain_resid(fit: FitResult, prob: Problem) -> np.ndarray:
+    """The validation residuals a gain is measured on: in the output's units for one output; for
+    several, each output divided by its scale (:func:`output_scales`), so the pooled RMSE is a
+    normalised RMSE and a position in metres is not drowned by a voltage."""
+    r = val_resid(fit, prob)
+    return r if r.shape[1] == 1 else r / output_scales(prob)
+
+
+def pooled(g: dict, ny: int) -> dict:
+    """Marks a gain of several outputs as measured on the normalised residuals (:func:`gain_resid`)."""
+    if ny > 1:
+        g["metric"] = "validation_nrmse_sim_pooled"
+    return g
 
 
 def mean_interval(d: np.ndarray, base: np.ndarray | None = None, level: float = 0.95) -> list[float]:

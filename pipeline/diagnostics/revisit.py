@@ -22,7 +22,7 @@ Four moves, each judged in the final model, that is given every cause found afte
    Raftery's 2 ln B scale, 1995, §3.2). The two alternatives of each finding with the lowest criterion
    are tried.
 2. **Drop** (:func:`drop_switch`). An intersample switch chosen before a later finding must still pass
-   the rule it was accepted by (:meth:`engine.Diagnoser._intersample`: ΔBIC below −2, a validation
+   the rule it was accepted by (:meth:`.intersample_stage.IntersampleStage.run`: ΔBIC below −2, a validation
    gain of at least 0.1 % and lower at the one-sided 5 % level), now against the final model refitted
    with the configured intersample. Otherwise it is dropped: a switch to zoh on a foh record is half a
    sample of input dead time (``Intersample.equivalent``), which a later delay finding takes over.
@@ -72,6 +72,11 @@ from ..fit import FitResult, estimated_x0, fit_output_error
 from ..model import Model
 from . import stats
 from .families import REGISTRY, Hypothesis
+from .console import log
+from .gain import gain_resid
+from .intersample_stage import INTERSAMPLE_MAX_DBIC, INTERSAMPLE_MIN_GAIN, ONE_SIDED_LEVEL
+from .naming import TIE_CRITERION
+from .refit_criteria import bic_of
 
 MAX_ALTERNATIVES = 2     # the runners-up of a finding tried in its place, lowest criterion first
 _FAIL = (InputError, SimulationError, np.linalg.LinAlgError, ArithmeticError, ValueError, KeyError)
@@ -94,7 +99,6 @@ def gap(final: FitResult, alt: FitResult, searched_final: int, searched_alt: int
     """The criterion of ``alt`` minus that of ``final`` (negative: ``alt`` is preferred): ΔBIC on the
     estimation part with the effective sample size of the better fit's residual (the one closer to the
     noise, as :func:`engine.effective_bic` takes it), plus the prior's difference."""
-    from .engine import bic_of
     n = final.resid_est.shape[0]
     better = alt if alt.sse_w < final.sse_w else final
     n_eff = max(stats.effective_n(n, stats.lag1(better.resid_est))[1], 2.0)
@@ -153,7 +157,7 @@ def rechain(dg, head: FitResult, later: list[Link], last: FitResult, seed_key: i
     same structure), each weighed against the link before it (:meth:`engine.Diagnoser._weigh`, the
     forward rule); None when one cannot be refitted. Intersample links are not moved (module
     docstring)."""
-    from .engine import Candidate, bic_of, effective_bic, gain_resid
+    from .engine import Candidate, effective_bic
     out, prev = [], head
     for j, link in enumerate(later):
         if link.cand is None:
@@ -184,7 +188,6 @@ def place(dg, links: list[Link], j: int, seed_key: int) -> tuple[bool, FitResult
     validation gain's 95 % lower bound above 0 and the likelihood-ratio p below α). Returns whether it
     holds, the final model refitted without the link (None when that refit fails: the link then
     counts as earning its place), the gain and the likelihood-ratio test."""
-    from .engine import gain_resid
     final, link = links[-1].after, links[j]
     without = link.before if j == len(links) - 1 else rebuild(dg, link.before.model, links[j + 1:], final, set())
     if without is None:
@@ -224,7 +227,7 @@ def swap(dg, links: list[Link], i: int) -> tuple[list[Link], dict] | None:
             continue
         s_alt = s_final - len(c.hyp.searched) + len(r.hyp.searched)
         d = gap(final, alt, s_final, s_alt, r.prior_penalty - c.prior_penalty)
-        if d < -dg.TIE_CRITERION and (best is None or d < best[0]):
+        if d < -TIE_CRITERION and (best is None or d < best[0]):
             best = (d, r, alt)
     if best is None:
         return None
@@ -258,19 +261,18 @@ class SwitchRule:
 
 
 def switch_rule(dg, final: FitResult, conf: Model, key: int) -> SwitchRule | None:
-    """The rule a switch was accepted by (:meth:`engine.Diagnoser._intersample`: ΔBIC below −2, a
+    """The rule a switch was accepted by (:meth:`.intersample_stage.IntersampleStage.run`: ΔBIC below −2, a
     validation gain of at least 0.1 % and lower at the one-sided 5 % level), applied to ``final``
     against ``final``'s model with ``conf``'s intersample and step, refitted; None when that refit
     fails. The gain's interval is analytic (:func:`gain.gain_ci`; ``key`` only seeds the generator its
     signature takes), so the switch that :func:`to_switch` puts in gets the same answer when
     :func:`drop_switch` re-examines it in the same final model."""
-    from .engine import INTERSAMPLE_MAX_DBIC, INTERSAMPLE_MIN_GAIN, ONE_SIDED_LEVEL
     m = replace(final.model, intersample=conf.intersample, substeps=conf.substeps)
     try:
         alt = fit_output_error(dg._compiled_if_long(m), dg.prob, start=estimated_x0(final))
     except _FAIL:
         return None
-    g, dbic = dg.switch_gain(alt, final, np.random.default_rng([dg.seed, key]))
+    g, dbic = dg.inter.switch_gain(alt, final, np.random.default_rng([dg.seed, key]))
     holds = g["p_not_lower"] < ONE_SIDED_LEVEL and g["relative"] >= INTERSAMPLE_MIN_GAIN and dbic < INTERSAMPLE_MAX_DBIC
     return SwitchRule(alt, g, dbic, holds)
 
@@ -292,7 +294,7 @@ def to_switch(dg, links: list[Link], i: int) -> tuple[list[Link], dict] | None:
         return None
     s_final = searched(links)
     d = gap(final, alt, s_final, s_final - len(c.hyp.searched), -c.prior_penalty)
-    if d >= -dg.TIE_CRITERION:
+    if d >= -TIE_CRITERION:
         return None
     rule = switch_rule(dg, alt, base, 7100 + i)
     if rule is None or not rule.holds:
@@ -405,8 +407,7 @@ def revisit(dg, links: list[Link]) -> tuple[list[Link], list[dict]]:
             if out is not None:
                 links, row = out
                 rows.append(row)
-                from .engine import _log
-                _log(f"  revisit: {row['detail']}")
+                log(f"  revisit: {row['detail']}")
                 if row["move"] == "swap" and links[i].cand is not None:
                     tried.add(("extension", links[i].cand.hyp.key))
                 # a switch is judged against the final model, which the move changed: judge it again

@@ -159,7 +159,7 @@ def test_a_large_smooth_effect_under_ar_noise_is_accepted_not_left_unexplained(t
     """Large effects with AR(1) 0.9 output noise at 2 %: the nominal residual is the effect itself (lag-1
     autocorrelation near 1). With N_eff of the likelihood-ratio test taken from that residual, all nine
     ended ``unexplained_discrepancy`` with no finding although their refits cut the validation RMSE;
-    with N_eff from the refit's residual (``engine.lr_against``) the first finding is the hidden
+    with N_eff from the refit's residual (``refit_criteria.lr_against``) the first finding is the hidden
     family, where it acts and with its key parameter within the issue's tolerance."""
     case = make_case(family, base, seed, magnitude="large", noise=0.02, colour="ar0.9", input_kind=kind,
                      out_dir=tmp_path)

@@ -18,7 +18,7 @@ from scipy import signal
 
 from pipeline.bench.independent.case import make_case
 from pipeline.config import load_config
-from pipeline.diagnostics import engine
+from pipeline.diagnostics import engine, intersample_stage
 from pipeline.diagnostics.engine import Diagnoser
 from pipeline.fit import fit_output_error
 from pipeline.runs import analyse
@@ -40,7 +40,7 @@ def _stage(prob, model):
     dg = Diagnoser(prob, alpha=0.01, families=[], max_findings=1, seed=0, dt=0.1)
     fit = fit_output_error(model, prob)
     with contextlib.redirect_stderr(io.StringIO()):
-        return dg._intersample(fit, np.random.default_rng(0))
+        return dg.inter.run(fit, np.random.default_rng(0))
 
 
 def test_foh_is_chosen_when_it_lowers_the_bic(tmp_path):
@@ -55,8 +55,8 @@ def test_a_lower_sse_with_a_higher_bic_is_not_accepted(tmp_path, monkeypatch):
     log-det BIC can rise on two outputs while the weighted SSE falls): the SSE still falls, the gain is
     still positive, and the choice is refused, with the reason."""
     prob, model = _foh_record(tmp_path)
-    real = engine.bic_of
-    monkeypatch.setattr(engine, "bic_of", lambda fit, searched=0: real(fit, searched)
+    real = intersample_stage.bic_of
+    monkeypatch.setattr(intersample_stage, "bic_of", lambda fit, searched=0: real(fit, searched)
                         + (1e6 if fit.model.intersample != "zoh" else 0.0))
     _, finding, hist = _stage(prob, model)
     assert finding is None

@@ -1,5 +1,5 @@
 """A switch to zoh and the configured foh with half a sample more input dead time
-(``Intersample.equivalent``, ``Diagnoser._intersample_equivalent``).
+(``Intersample.equivalent``, ``IntersampleStage.equivalent``).
 
 The premise is checked with scipy alone (``scipy.signal.lsim``: linear interpolation or a hold between
 samples), then the family's twin model in closed form, then the finding on an independent-bench record

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from pipeline.bench.independent.case import make_case
 from pipeline.config import load_config
-from pipeline.diagnostics.engine import INTERSAMPLE_MIN_GAIN
+from pipeline.diagnostics.intersample_stage import INTERSAMPLE_MIN_GAIN
 from pipeline.runs import analyse
 
 
@@ -36,6 +36,6 @@ def test_an_immaterial_finer_step_is_not_named(tmp_path):
     for c in rows:
         assert not c["accepted"]
         if c["gain"]["p_not_lower"] < 0.05:
-            # it fails both floors; the reason names the first checked (engine.INTERSAMPLE_MAX_DBIC, then the gain)
+            # it fails both floors; the reason names the first checked (intersample_stage.INTERSAMPLE_MAX_DBIC, then the gain)
             assert ("a switch must explain to be named" in c["reason"]
                     or "BIC not lower by more than 2" in c["reason"])

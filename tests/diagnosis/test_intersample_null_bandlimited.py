@@ -1,5 +1,5 @@
 """A switch from foh to the band-limited signal needs positive estimation evidence (ΔBIC below −2,
-``engine.INTERSAMPLE_MAX_DBIC``). Null records of the independent bench's test seeds (multisine inputs,
+``intersample_stage.INTERSAMPLE_MAX_DBIC``). Null records of the independent bench's test seeds (multisine inputs,
 configured foh, no effect) whose slow plants make the two interpolations differ by 0.1–0.2 % of the
 validation RMSE got an intersample finding at ΔBIC −0.27 to −1.2 when ΔBIC < 0 was enough."""
 

@@ -1,7 +1,7 @@
 """The intersample choice is accepted on a one-sided held-out test (``gain.p_not_lower`` < 0.05, H0: the
 validation error is not lower), where an extension that adds parameters needs the two-sided 95 %
 interval above 0. It adds no parameter: the estimation BIC already prefers it, and the held-out test
-checks that direction (``Diagnoser._intersample``).
+checks that direction (``IntersampleStage.run``).
 
 Records from the independent bench (solve_ivp on the held input; the config says foh, the plant saw
 zoh) at 10 % output noise: the correct switch lowers the validation RMSE by about 2 %, with a two-sided
@@ -18,7 +18,7 @@ import pytest
 
 from pipeline.bench.independent.case import make_case
 from pipeline.config import load_config
-from pipeline.diagnostics import engine
+from pipeline.diagnostics import intersample_stage
 from pipeline.runs import analyse
 
 
@@ -34,7 +34,7 @@ def test_intersample_switch_accepted_on_the_one_sided_test(tmp_path, base, input
     assert first["family"] == "intersample" and first["chosen"] == "zoh" and first["configured"] == "foh"
     g = first["gain"]
     # the two-sided interval alone would have refused it; the one-sided test at 5 % accepts it
-    assert g["ci95"][0] <= 0 < g["relative"] and g["p_not_lower"] < engine.ONE_SIDED_LEVEL
+    assert g["ci95"][0] <= 0 < g["relative"] and g["p_not_lower"] < intersample_stage.ONE_SIDED_LEVEL
     assert g["ci95"][0] <= g["relative"] <= g["ci95"][1]
     assert "one-sided p" in first["description"]
     # and its evidence row carries that p-value (the report printed "p = –")

@@ -342,13 +342,13 @@ def test_lr_test_keeps_its_power_when_the_missing_term_is_large_and_smooth(phi):
 
 
 def test_the_engine_takes_the_effective_sample_size_from_the_refit():
-    """``engine.lr_against``, the acceptance test the loop, the intersample stage and the LR screen use:
+    """``refit_criteria.lr_against``, the acceptance test the loop, the intersample stage and the LR screen use:
     the current residual is a 48-sd sinusoid plus AR(1) 0.5 noise, the refit's residual the noise.
     The refit is accepted (p < 1e-6) and N_eff is the noise's, N(1 − ρ)/(1 + ρ) with ρ ≈ 0.5; with ρ̂
     of the current residual N_eff would be about one sample."""
     from types import SimpleNamespace
 
-    from pipeline.diagnostics.engine import lr_against
+    from pipeline.diagnostics.refit_criteria import lr_against
     rng = np.random.default_rng(20)
     n, t = 1400, np.arange(1400)
     e = _ar(rng, 0.5, n) * math.sqrt(1.0 - 0.25)

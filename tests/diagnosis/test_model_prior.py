@@ -127,20 +127,17 @@ def test_effective_bic_leaves_white_residuals_nearly_as_they_are():
 
 # ------------------------------------------------------------------ near-equals separated by validation
 def _separate(best, others, y, yhats):
-    """Diagnoser.separate on a one-output problem whose validation part is the whole record."""
+    """naming.separate on a one-output problem whose validation part is the whole record."""
     import numpy as np
     from types import SimpleNamespace
     from pipeline.data import Split
-    from pipeline.diagnostics.engine import Diagnoser
+    from pipeline.diagnostics import naming
     y = np.asarray(y, float).reshape(-1, 1)
     prob = SimpleNamespace(Y=y, split=Split((0, 0), (0, len(y))))
     for c, yh in zip([best] + others, yhats):
         c.fit = SimpleNamespace(Yhat=np.asarray(yh, float).reshape(-1, 1))
         c.gain = {"relative": 0.5}
-    me = SimpleNamespace(prob=prob, TIE_CRITERION=Diagnoser.TIE_CRITERION,
-                         SEPARATE_CRITERION=Diagnoser.SEPARATE_CRITERION,
-                         SEPARATION_MIN_GAIN=Diagnoser.SEPARATION_MIN_GAIN)
-    return Diagnoser.separate(me, best, [best] + others)
+    return naming.separate(prob, best, [best] + others)
 
 
 def test_a_near_equal_clearly_better_on_validation_is_the_finding():

@@ -138,7 +138,7 @@ def test_first_screen_says_where_the_nominal_simulation_stops_and_on_which_sampl
 
 
 def test_first_screen_says_when_the_validation_part_prefers_another_cause():
-    """``disputed_by`` (engine ``Diagnoser._disputed``): the estimation part chose the finding beyond a tie,
+    """``disputed_by`` (``naming.disputed``): the estimation part chose the finding beyond a tie,
     the validation part clearly prefers another; the first screen says the two parts disagree."""
     s = _summary(62.39, 97.6)
     s["diagnosis"]["findings"][0]["disputed_by"] = [{"family": "input_delay", "hypothesis": "input_delay",
@@ -311,10 +311,10 @@ def test_figures_are_readable_sizes(demo_reports):
 
 def test_a_finding_sentence_never_shows_a_bare_minus_zero():
     """An intersample finding's interval [-5e-6, 0.005] read "95 % CI -0.0 to 0.5 %" (independent probe)."""
-    from pipeline.diagnostics.engine import Diagnoser
-    text = Diagnoser._gain_text({"before": 1.0, "after": 0.998, "relative": 0.002, "ci95": [-5e-6, 0.005]}, -3.0)
+    from pipeline.diagnostics.naming import gain_text
+    text = gain_text({"before": 1.0, "after": 0.998, "relative": 0.002, "ci95": [-5e-6, 0.005]}, -3.0)
     assert "95 % CI -0.0005 to 0.5 %" in text and "-0.0 " not in text
-    assert "(50.0 % better, 95 % CI 40.0 to 60.0 %" in Diagnoser._gain_text(
+    assert "(50.0 % better, 95 % CI 40.0 to 60.0 %" in gain_text(
         {"before": 1.0, "after": 0.5, "relative": 0.5, "ci95": [0.4, 0.6]}, -300.0)
 
 

@@ -2,7 +2,7 @@
 the band-limited signal) or the integration step. Tested before any physical family: the nominal model
 is refitted with the other intersample behaviours (``OTHERS``) and with four times the RK4 sub-steps;
 an alternative that lowers the held-out free-run error (the engine's gain test) and the estimation BIC
-by more than 2 (same parameter count; ``engine.INTERSAMPLE_MAX_DBIC``) is the first finding, and the
+by more than 2 (same parameter count; ``intersample_stage.INTERSAMPLE_MAX_DBIC``) is the first finding, and the
 rest of the diagnosis runs on it. A band-limited input sampled and simulated
 with zoh otherwise makes null records look like friction or coloured noise."""
 
