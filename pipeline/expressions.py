@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ast
 import math
-import sys
 import threading
 import unicodedata
 from dataclasses import dataclass

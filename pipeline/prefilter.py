@@ -67,7 +67,7 @@ def _signal(x, name: str = "x", min_len: int = 2) -> np.ndarray:
     if x.size < min_len:
         raise InputError(f"expected at least {min_len} samples, got {x.size}", key=name)
     if not np.all(np.isfinite(x)):
-        raise InputError(f"expected finite samples, found NaN or inf", key=name)
+        raise InputError("expected finite samples, found NaN or inf", key=name)
     return x
 
 

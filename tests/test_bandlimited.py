@@ -69,8 +69,6 @@ def test_a_simulation_sees_the_same_input_wherever_it_stops(tmp_path):
     """``Problem.inputs`` filters each experiment once and whole: a simulation that stops 50 samples early
     gives the same rows as the full one (filtered per call, the last 31 samples of the shorter one would
     see mirrored values instead of the record's). The record comes from the independent bench."""
-    import contextlib
-    import io
     from pathlib import Path
 
     import yaml

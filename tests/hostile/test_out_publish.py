@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.runfolder import is_complete_run, is_replaceable_run
+from pipeline.runfolder import is_replaceable_run
 
 from .demo_project import make_project, marker, run_files, tree
 from .harness import ROOT, run_cli

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from pipeline.bench.independent import effects as fx
-from pipeline.bench.independent.integrate import StateLimit, integrate
+from pipeline.bench.independent.integrate import StateLimit
 from pipeline.bench.independent.noise import add_noise, ar1
 from pipeline.bench.independent.plant import Plant
-from pipeline.bench.independent.signals import BandLimited, Delayed, Held, Mapped, lfsr_bits, play_operator, prbs
+from pipeline.bench.independent.signals import BandLimited, Delayed, Held, lfsr_bits, play_operator, prbs
 from pipeline.bench.independent.systems import BASES
 
 
