@@ -61,10 +61,10 @@ from .gain import gain_ci, gain_resid, pooled, unbounded_note
 from .intersample_stage import IntersampleStage
 from .refit_criteria import bic_of, lr_against
 from . import naming
-from .naming import CONTEST_SENTENCES, RUNNER_UP_DBIC, SEPARATION_MIN_GAIN, p_text, separates
+from .naming import RUNNER_UP_DBIC, SEPARATION_MIN_GAIN, p_text, separates
 from .state_probe import NAME as PROBE_NAME, probe_hypotheses, what as probe_what, where as probe_where
 from .pairs import Member, hidden_pairs
-from .revisit import Link, revisit
+from .revisit import Link, revisit, revisited_findings
 from .why import LOOKED_AHEAD
 
 
@@ -1405,7 +1405,7 @@ class Diagnoser:
         old = list(links)
         links, moves = revisit(self, links)
         if moves:
-            findings = self._revisited(links, old, findings, moves)
+            findings = revisited_findings(self, links, old, findings, moves)
             current = links[-1].after
             last_p = None
         fits = [nominal] + [l.after for l in links]
@@ -1609,68 +1609,6 @@ class Diagnoser:
         return [o for o in cands if o is not c and o.fit is not None and o.gain is not None
                 and o.delta_bic_eff is not None and c.delta_bic_eff is not None and o.hyp.family != c.hyp.family
                 and o.criterion - c.criterion <= RUNNER_UP_DBIC]
-
-    # a finding's keys that describe how its own forward round weighed it against the others
-    FORWARD_ROUND_KEYS = ("selection", "runners_up", "tied_with", "disputed_by")
-
-    def _revisited(self, links: list[Link], old: list[Link], findings: list[dict],
-                   moves: list[dict]) -> list[dict]:
-        """The findings of a chain the backward step changed (:mod:`.revisit`): a link it kept keeps its
-        finding (matched by its fit); a moved or refitted one gets a new finding from its candidate, with
-        the move in ``revisit`` and its evidence. A refitted one (the same hypothesis, not swapped in)
-        keeps what its forward round said about the alternatives (``FORWARD_ROUND_KEYS`` and the
-        sentences on ties and disputes), marked as the forward round's: the refit does not weigh them
-        again (on the delay + offset record of seed 2007 the offset's runner-up was lost when the zoh
-        switch before it was dropped)."""
-        out = []
-        for link in links:
-            k = next((j for j, l in enumerate(old) if l.after is link.after), None)
-            if k is not None:
-                out.append(findings[k])
-            elif link.cand is None:         # a switch the backward step put in (revisit.to_switch)
-                chosen = link.after.model.intersample
-                g, dbic = self.inter.switch_gain(link.before, link.after, np.random.default_rng([self.seed, 7400]))
-                f = self.inter.switch_finding(link.before, chosen, link.after, dbic, g)
-                move = next((m for m in moves if m["replaced_by"] == f"intersample:{chosen}"), None)
-                if move is not None:
-                    f["revisit"] = move["detail"]
-                    f["gain_given"] = move["gain_given"]
-                    f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
-                                                      "p_value": None, "detail": move["detail"]}]
-                else:
-                    f["revisit"] = "refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")"
-                f["description"] += f" Backward step: {f['revisit']}."
-                out.append(f)
-            else:
-                f = naming.finding(self.prob, self.dt, link.cand, [])
-                move = next((m for m in moves if m["replaced_by"] == link.cand.hyp.key), None)
-                if move is not None:
-                    f["revisit"] = move["detail"]
-                    f["evidence"] = f["evidence"] + [{"test": "revisit_swap", "statistic": -move["criterion_change"],
-                                                      "p_value": None, "detail": move["detail"]}]
-                else:
-                    f["revisit"] = ("refitted after the backward step (" + "; ".join(m["short"] for m in moves) + ")")
-                    f["description"] += self._forward_round(f, next(
-                        (findings[j] for j, l in enumerate(old) if l.cand is not None and l.cand.hyp is link.cand.hyp),
-                        None))
-                f["description"] += f" Backward step: {f['revisit']}."
-                out.append(f)
-        return out
-
-    def _forward_round(self, f: dict, before: dict | None) -> str:
-        """Copies into the refitted finding ``f`` what its forward-round finding ``before`` said about the
-        other causes (``FORWARD_ROUND_KEYS``, where ``f`` has none of its own), and returns the forward
-        round's sentences on ties and disputes, introduced as such ("" when there are none)."""
-        if before is None:
-            return ""
-        carried = [key for key in self.FORWARD_ROUND_KEYS if before.get(key) and not f.get(key)]
-        for key in carried:
-            f[key] = before[key]
-        if carried:
-            f["forward_round"] = carried
-        desc = before.get("description", "")
-        at = [desc.find(m) for m in CONTEST_SENTENCES if m in desc]
-        return f" In its forward round:{desc[min(at):]}" if at else ""
 
 
 def _wald_evidence(h: Hypothesis, w: stats.WaldResult) -> dict:
