@@ -124,10 +124,10 @@ def test_hidden_noise_family_found(system, kind):
         assert ok(f), (seed, f)
         g = f["gain"]
         assert g["metric"] == "validation_nll" and g["ci95"][0] > 0 and g["after"] < g["before"]
-        # relative and ci95 are one quantity (the relative NLL drop), so the interval brackets the point
+        # relative and ci95 are one quantity (the error scale drop the NLL drop equals), so the interval brackets the point
         assert g["ci95"][0] <= g["relative"] <= g["ci95"][1]
         assert g["absolute_ci95"][0] <= g["absolute"] <= g["absolute_ci95"][1]
-        assert g["relative"] == pytest.approx((g["before"] - g["after"]) / abs(g["before"]), rel=1e-9)
+        assert g["relative"] == pytest.approx(-math.expm1(g["after"] - g["before"]), rel=1e-9)   # one output
         assert f["delta_bic"] < 0 and f["description"].endswith(".") and f["evidence"][0]["p_value"] < 0.01
         assert set(f["interval_width"]) >= {"before", "after"} and "parameter_error" in f
 

@@ -208,6 +208,14 @@ def first_screen(s: dict) -> dict:
                          f"interval of the gain {interval})" + (
                              "." if ci[0] is not None and ci[0] > 0 else
                              f", an interval not above 0: {their}misfit was still in the validation residual."))
+        elif g.get("metric") == "validation_nll":
+            # a noise model: its gain is in likelihood, and the simulation is the one before
+            aci = g.get("absolute_ci95") or [None, None]
+            lines.append(f"{head} Adding it lowers the validation negative log-likelihood per sample from "
+                         f"{sig(g.get('before'))} to {sig(g.get('after'))} (a drop of {sig(g.get('absolute'))}, 95 % "
+                         f"interval {sig(aci[0])} to {sig(aci[1])}); for Gaussian errors that is an error scale "
+                         f"{sig(100 * g['relative'], 3)} % smaller (95 % interval {interval}) for this validation "
+                         "input. A noise model does not change the free-run simulation.")
         else:
             lines.append(f"{head} Adding it lowers the validation {err} by "
                          f"{sig(100 * g['relative'], 3) if g.get('relative') is not None else '–'} % (95 % interval "
@@ -220,6 +228,8 @@ def first_screen(s: dict) -> dict:
             lines.append(f"{plural(len(findings), 'partial finding' if partial else 'cause')} found in all: "
                          + ", ".join(str(f.get("family")) for f in findings)
                          + f"; with all of them the fit is {_fit_text(fin)}.")
+        elif (f0.get("gain") or {}).get("metric") == "validation_nll":
+            lines.append(f"The free-run fit is unchanged: {_fit_text(fin)}.")
         else:
             lines.append(f"With it the fit is {_fit_text(fin)}.")
     elif diag.get("rounding_level"):
