@@ -305,3 +305,14 @@ def model_rows(s: dict) -> list[dict]:
                         for i, t in enumerate(m.get("terms") or [])]
     rows.sort(key=lambda m: (m.get("cv_mean") is None, m.get("cv_mean") or 0.0))
     return rows
+
+
+def equation_error_note(s: dict) -> str:
+    """What the structures table's ``cv_rmse_one_step`` column is: the rows' ``cv_rmse_one_step_measures``
+    (the regression target is d(eq)/dt, so an equation error of the derivative, not a one-step
+    prediction); a run written before that key gets the same words without the unit."""
+    eq = ((s.get("structures") or {}).get("settings") or {}).get("equation") or "x"
+    said = next((m["cv_rmse_one_step_measures"] for m in s.get("models") or []
+                 if m.get("cv_rmse_one_step_measures")), None)
+    return said or (f"equation error of d{eq}/dt, in units of {eq} per second: RMS of the regression residual "
+                    f"on the fold; not a one-step-ahead prediction of {eq}")
