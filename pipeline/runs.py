@@ -30,6 +30,7 @@ from .jsonutil import dumps
 from .config import LoadedConfig, implemented_families, load_config, noise_families
 from .errors import ConfigError, InputError, SimulationError, in_file
 from .data import Record, Split, apply_prefilters, file_sha256, load_record, make_split, remove_means
+from .diagnostics.adequacy import is_informational
 from .diagnostics.coverage import coverage
 from .diagnostics.engine import Diagnoser, Diagnosis, bic_of, fit_percent, rmse
 from .diagnostics.why import why_unexplained
@@ -262,10 +263,12 @@ def _not_testable(history: list[dict]) -> list[dict]:
 
 def _test_rows(tests, on: str) -> list[dict]:
     """Contract §3 test rows, extended: ``tested`` is false on a row that was not run (a noise family
-    on an inadequate structure), whose ``passed`` is then false without anything having failed."""
+    on an inadequate structure), whose ``passed`` is then false without anything having failed;
+    ``informational`` (only where true) marks a row about the data that is not part of the verdict
+    (:func:`.diagnostics.adequacy.is_informational`: the closed-loop sign)."""
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
              "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail,
-             "on": getattr(t, "on", None) or on,
+             "on": getattr(t, "on", None) or on, **({"informational": True} if is_informational(t.name) else {}),
              **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
             for t in tests]
 

@@ -303,6 +303,7 @@ def test_ballbeam_is_unexplained_and_flagged_as_closed_loop(tmp_path):
     d = s["diagnosis"]
     fb = next(t for t in d["tests"] if t["name"] == "feedback_crosscorrelation")
     assert not fb["passed"] and fb["p_value"] < 0.01 and "closed loop" in fb["detail"]
+    assert fb["informational"] is True     # about the data: shown, not part of the verdict
     assert d["verdict"] == "unexplained_discrepancy" and not d["findings"]
     assert d["unexplained"]["failed_tests"]
     # a friction-type term is significant; its refit (started from the current fit, x0 included) is

@@ -273,6 +273,15 @@ def feedback_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
 
 
 PREDICTABLE = 1e-6   # AR residual variance / input variance below which the feedback row is not tested
+FEEDBACK = "feedback_crosscorrelation"
+
+
+def is_informational(name: str) -> bool:
+    """A test row that says something about the data, not about the model's adequacy (the closed-loop
+    sign of :func:`feedback_tests`): shown, never part of the verdict, and marked so in the summary
+    (``informational``) and the report, so that a failed one cannot read as a failed adequacy test
+    beside a "no discrepancy" verdict."""
+    return name.startswith(FEEDBACK)
 
 
 def _feedback_row(e: np.ndarray, u: np.ndarray, alpha: float) -> stats.TestResult:

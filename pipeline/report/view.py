@@ -251,6 +251,16 @@ def first_screen(s: dict) -> dict:
     elif nf is not None and nf < 0:
         warnings.append(f"The nominal model is unusable on validation data (fit {sig(nf, 3)} %, worse than the "
                         "output's mean); only the extended model should be used.")
+    flagged = [t for t in diag.get("tests") or [] if (t.get("informational") or str(t.get("name", "")).startswith(
+        "feedback_crosscorrelation")) and t.get("tested", True) and not t.get("passed")]
+    if flagged:
+        # a row about the data, not the model: said beside the verdict so that the failed row in the tests
+        # table does not read as a failed adequacy test
+        warnings.append("Not part of the verdict: the nominal residual correlates with the input's future ("
+                        + "; ".join(f"{t['name']}, p = {sig(t.get('p_value'), 2)}" for t in flagged)
+                        + "). Either the input responds to the output (closed-loop data: output-error estimates of "
+                        "a misspecified model are then biased), or the input is predictable from its past (a line "
+                        "spectrum such as a multisine) and a small misfit it drives shows at negative lags.")
     if verdict == "unexplained_discrepancy":
         warnings.append("Verdict: unexplained discrepancy. The residual tests still fail and no effect family's "
                         "extension explains what remains" + (" (the findings listed are partial)." if findings

@@ -137,6 +137,27 @@ def test_first_screen_says_where_the_nominal_simulation_stops_and_on_which_sampl
     assert "stops" not in plain and "samples where" not in plain
 
 
+def test_a_flagged_closed_loop_sign_is_said_beside_a_no_discrepancy_verdict_as_not_part_of_it():
+    """An auditor's record (the correct model, a sum-of-sines input, foh): verdict no discrepancy while the
+    nominal tests table showed feedback_crosscorrelation "failed" (p = 0.0035), with nothing said. The row
+    is about the data, not the model: the summary marks it ``informational`` and the first screen says it
+    is not part of the verdict and what it can mean; a passing row says nothing."""
+    from pipeline.diagnostics.stats import TestResult
+    from pipeline.runs import _test_rows
+    rows = _test_rows([TestResult("feedback_crosscorrelation", 0.004, 0.0035, None, False, "largest at lag -3"),
+                       TestResult("feedback_crosscorrelation[u2->y]", 0.001, 0.5, None, True, ""),
+                       TestResult("ljung_box", 12.0, 0.3, None, True, "")], "nominal model, estimation data")
+    assert [r.get("informational") for r in rows] == [True, True, None]
+    s = _summary(90.0, 90.0, verdict="no_significant_discrepancy", findings=False)
+    s["diagnosis"]["tests"] = rows
+    fs = view.first_screen(s)
+    assert "the nominal model is adequate" in " ".join(fs["lines"])
+    [w] = [w for w in fs["warnings"] if w.startswith("Not part of the verdict")]
+    assert "feedback_crosscorrelation, p = 0.0035" in w and "[u2->y]" not in w and "closed-loop" in w
+    rows[0]["passed"] = True
+    assert not any(w.startswith("Not part of the verdict") for w in view.first_screen(s)["warnings"])
+
+
 def test_first_screen_says_when_the_validation_part_prefers_another_cause():
     """``disputed_by`` (``naming.disputed``): the estimation part chose the finding beyond a tie,
     the validation part clearly prefers another; the first screen says the two parts disagree."""
