@@ -261,6 +261,17 @@ def first_screen(s: dict) -> dict:
                         + "). Either the input responds to the output (closed-loop data: output-error estimates of "
                         "a misspecified model are then biased), or the input is predictable from its past (a line "
                         "spectrum such as a multisine) and a small misfit it drives shows at negative lags.")
+    remaining = [t for t in diag.get("final_tests") or [] if t.get("tested", True) and not t.get("passed")
+                 and not t.get("informational")]
+    if verdict == "discrepancy" and remaining:
+        # the causes named explain the misfit; a residual test that still fails beside them is said, not hidden
+        warnings.append("After the causes named, the final model's residual still fails "
+                        + "; ".join(f"{t['name']} (p = {sig(t.get('p_value'), 2)}"
+                                    + (f", {sig(100 * t['explained_share'], 2)} % of the residual"
+                                       if t.get("explained_share") is not None else "") + ")" for t in remaining[:4])
+                        + (f" and {len(remaining) - 4} more" if len(remaining) > 4 else "")
+                        + "; no structural test explains 2 % of the residual or more, so nothing left is "
+                        "material to the model's structure (section 3 has the tests).")
     if verdict == "unexplained_discrepancy":
         warnings.append("Verdict: unexplained discrepancy. The residual tests still fail and no effect family's "
                         "extension explains what remains" + (" (the findings listed are partial)." if findings

@@ -158,6 +158,22 @@ def test_a_flagged_closed_loop_sign_is_said_beside_a_no_discrepancy_verdict_as_n
     assert not any(w.startswith("Not part of the verdict") for w in view.first_screen(s)["warnings"])
 
 
+def test_a_residual_test_still_failing_after_the_causes_is_said():
+    """An auditor's record: a switch to foh named, the final model's fisher_g still failing (p = 0.0097)
+    and the first screen silent about it. Said now, with its p; an informational row and a row that was
+    not run are not listed, and nothing is said when every final test passes."""
+    s = _summary(62.39, 97.6)
+    s["diagnosis"]["final_tests"] = [
+        {"name": "fisher_g", "p_value": 0.0097, "passed": False, "tested": True},
+        {"name": "ljung_box", "p_value": 0.2, "passed": True, "tested": True},
+        {"name": "colored_noise", "p_value": None, "passed": False, "tested": False},
+        {"name": "feedback_crosscorrelation", "p_value": 0.001, "passed": False, "tested": True, "informational": True}]
+    [w] = [w for w in view.first_screen(s)["warnings"] if w.startswith("After the causes named")]
+    assert "fisher_g (p = 0.0097)" in w and "colored_noise" not in w and "feedback" not in w
+    s["diagnosis"]["final_tests"][0]["passed"] = True
+    assert not any(w.startswith("After the causes named") for w in view.first_screen(s)["warnings"])
+
+
 def test_first_screen_says_when_the_validation_part_prefers_another_cause():
     """``disputed_by`` (``naming.disputed``): the estimation part chose the finding beyond a tie,
     the validation part clearly prefers another; the first screen says the two parts disagree."""
