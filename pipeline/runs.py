@@ -265,10 +265,12 @@ def _test_rows(tests, on: str) -> list[dict]:
     """Contract §3 test rows, extended: ``tested`` is false on a row that was not run (a noise family
     on an inadequate structure), whose ``passed`` is then false without anything having failed;
     ``informational`` (only where true) marks a row about the data that is not part of the verdict
-    (:func:`.diagnostics.adequacy.is_informational`: the closed-loop sign)."""
+    (:func:`.diagnostics.adequacy.is_informational`: the closed-loop sign); ``output`` and ``input`` (with
+    several outputs or excited inputs only) the output and input a row is on."""
     return [{"name": t.name, "statistic": t.statistic, "p_value": t.p_value, "bound": t.bound,
              "passed": t.passed, "tested": not (t.detail or "").startswith("not tested"), "detail": t.detail,
              "on": getattr(t, "on", None) or on, **({"informational": True} if is_informational(t.name) else {}),
+             **{k: getattr(t, k) for k in ("output", "input") if getattr(t, k, None) is not None},
              **({} if t.r2 is None else {"explained_share": t.r2, "material": (not t.passed) and t.r2 >= 0.02})}
             for t in tests]
 

@@ -262,12 +262,15 @@ def feedback_tests(fit, prob, alpha: float) -> list[stats.TestResult]:
     correlations (Ljung 1999, §16.6); like the battery's pair rows, each is a test at α of its pair."""
     sl = prob.split.est_slice()
     excited = excited_inputs(prob)
+    several = fit.resid_est.shape[1] > 1 or len(excited) > 1
     out = []
     for i in range(fit.resid_est.shape[1]):
         for j in excited:
             t = _feedback_row(fit.resid_est[:, i], prob.U[sl, j], alpha)
             if i > 0 or j != excited[0]:
                 t.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
+            if several:     # the pair it is on, for the plainly named first row too (residual_tests)
+                t.output, t.input = prob.out_names[i], fit.model.inputs[j]
             out.append(t)
     return out
 

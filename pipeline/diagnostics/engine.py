@@ -265,11 +265,14 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
     """The residual battery on every output (and every output × excited input for the
     cross-correlation and the Billings–Voon higher-order correlations). The first output (and its first excited input) keeps the plain names the
     contract's ``tests`` rows have always had (``ljung_box``, ``input_crosscorrelation``…); the other
-    outputs and pairs add rows named ``…[y]`` / ``…[u->y]``. Returns the tests and the frequency
-    (cycles/sample) of the most significant Fisher-g peak over the outputs."""
+    outputs and pairs add rows named ``…[y]`` / ``…[u->y]``. With more than one output or excited input
+    every row also carries the output (``output``) and, for a pair, the input (``input``) it is on, so
+    the plainly named first rows say which they are. Returns the tests and the
+    frequency (cycles/sample) of the most significant Fisher-g peak over the outputs."""
     sl = prob.split.est_slice()
     ny = fit.resid_est.shape[1]
     excited = excited_inputs(prob)
+    several = ny > 1 or len(excited) > 1
     tests, best = [], None
     for i in range(ny):
         e = fit.resid_est[:, i]
@@ -282,12 +285,16 @@ def residual_tests(fit: FitResult, prob: Problem, alpha: float) -> tuple[list[st
             for xc in (r for r in pair if r is not None):
                 if i > 0 or j != excited[0]:
                     xc.name += f"[{fit.model.inputs[j]}->{prob.out_names[i]}]"
+                if several:
+                    xc.input = fit.model.inputs[j]
                 rows.append(xc)
         g, f_cyc = stats.fisher_g(e, alpha)
         rows.append(g)
         for r in rows:
             if tag and not r.name.endswith("]"):
                 r.name += tag
+            if several:
+                r.output = prob.out_names[i]
         tests += rows
         if best is None or g.p_value < best[0].p_value:
             best = (g, f_cyc)

@@ -68,6 +68,14 @@ def test_effect_on_the_second_output_is_found_and_its_gain_is_pooled_on_scale(tm
         assert f"input_crosscorrelation[{pair}]" in names
     rows = {r["name"]: r for r in s["diagnosis"]["tests"]}
     assert rows["ljung_box[T2]"]["p_value"] < 1e-6          # the second output's own battery sees it
+    # and every row says which output (and input) it is on, the plainly named first ones too (an
+    # auditor read ``input_crosscorrelation`` beside ``input_crosscorrelation[u2->x1]`` without knowing it)
+    assert (rows["ljung_box"]["output"], rows["ljung_box[T2]"]["output"]) == ("y1", "T2")
+    assert (rows["input_crosscorrelation"]["output"], rows["input_crosscorrelation"]["input"]) == ("y1", "u1")
+    assert (rows["feedback_crosscorrelation"]["output"], rows["feedback_crosscorrelation"]["input"]) == ("y1", "u1")
+    assert rows["input_crosscorrelation[u2->T2]"]["input"] == "u2" and "input" not in rows["mean_t"]
+    assert all("output" in r for r in s["diagnosis"]["tests"] + s["diagnosis"]["final_tests"]
+               if not r["name"].endswith("_noise") and r["name"] != "noise_families")
     first = s["diagnosis"]["findings"][0]
     assert first["family"] == "static_nonlinearity"
     assert first["equation"] == "T2" and "u2" in first["term"]
