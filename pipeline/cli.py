@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print("interrupted; no run folder written", file=sys.stderr)
-        return 1
+        return 130      # 128 + SIGINT, the shell's code for a command stopped by Ctrl-C
     except Exception:
         traceback.print_exc()
         print("internal error: please report it with the traceback above", file=sys.stderr)
@@ -91,7 +91,8 @@ def _remember_interrupts(runfolder):
     thread, where signals cannot be handled)."""
     def on_sigint(signum, frame):
         runfolder.INTERRUPTED.set()
-        signal.default_int_handler(signum, frame)
+        if not runfolder.DEFERRING.is_set():    # else the deferring code raises (runfolder.deferred_interrupts)
+            signal.default_int_handler(signum, frame)
     try:
         return signal.signal(signal.SIGINT, on_sigint)
     except ValueError:

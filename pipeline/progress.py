@@ -106,12 +106,14 @@ class Stage:
             self._timer.start()
         return self
 
-    def finish(self, ok: bool = True) -> None:
+    def finish(self, ok: bool | str = True) -> None:
+        """``ok``: True (done), False (failed) or the word to print instead (``"interrupted"``)."""
         self._stop.set()
         if self._timer is not None:
             self._timer.join(timeout=1.0)
         n = f"{self.items} items, " if self.items is not None else ""
-        emit(f"[{self.name}] ... {'done' if ok else 'failed'} ({n}{_fmt_s(self.elapsed())})")
+        word = ok if isinstance(ok, str) else ("done" if ok else "failed")
+        emit(f"[{self.name}] ... {word} ({n}{_fmt_s(self.elapsed())})")
 
 
 @contextlib.contextmanager
@@ -123,10 +125,13 @@ def stage(name: str, total: int | None = None) -> Iterator[Stage]:
     if stack is None:
         stack = _local.stack = []
     stack.append(st)
-    ok = False
+    ok: bool | str = False
     try:
         yield st
         ok = True
+    except KeyboardInterrupt:
+        ok = "interrupted"       # Ctrl-C, not a failure of the stage
+        raise
     finally:
         stack.pop()
         st.finish(ok)

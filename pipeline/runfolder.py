@@ -61,6 +61,28 @@ MARKER = ".sysid-run"
 MARKER_FORMAT = 2
 TMP_TOKEN = ".sysid-tmp"   # in a temp folder from its creation until finalize: this tool made it
 INTERRUPTED = threading.Event()   # set by the CLI's SIGINT handler: never publish after a Ctrl-C
+# while set, the CLI's SIGINT handler only sets INTERRUPTED and the code that set it raises
+# KeyboardInterrupt itself (:func:`deferred_interrupts`)
+DEFERRING = threading.Event()
+
+
+@contextlib.contextmanager
+def deferred_interrupts() -> Iterator[None]:
+    """Within: a Ctrl-C under the CLI only marks the process ``INTERRUPTED``; the caller checks the mark
+    (:func:`raise_if_interrupted`) where raising is clean. For a loop whose callee prints the traceback of
+    any exception raised inside it: emcee's likelihood wrapper printed a KeyboardInterrupt's before the
+    CLI's "interrupted" line. On leaving, a mark set meanwhile raises."""
+    DEFERRING.set()
+    try:
+        yield
+    finally:
+        DEFERRING.clear()
+    raise_if_interrupted()
+
+
+def raise_if_interrupted() -> None:
+    if INTERRUPTED.is_set():
+        raise KeyboardInterrupt
 STALE_AGE_S = 86400.0
 KILL_POINTS = ("after_temp_created", "after_summary_written", "after_old_moved_aside",
                "after_new_renamed_in", "before_old_deleted")

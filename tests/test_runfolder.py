@@ -343,7 +343,7 @@ def test_a_ctrl_c_lost_in_a_callback_still_publishes_nothing(tmp_path, capsys, m
     cfg = Path(__file__).resolve().parents[1] / "configs" / "demo.yaml"
     out = tmp_path / "run"
     code = main(["diagnose", str(cfg), "--out", str(out)])
-    assert code == 1 and "interrupted; no run folder written" in capsys.readouterr().err
+    assert code == 130 and "interrupted; no run folder written" in capsys.readouterr().err
     assert not out.exists() and not any(tmp_path.iterdir())
     assert not rf.INTERRUPTED.is_set()             # cleared for the next command in this process
 

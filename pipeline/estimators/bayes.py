@@ -20,6 +20,7 @@ import numpy as np
 from scipy import optimize
 
 from .. import progress
+from ..runfolder import deferred_interrupts, raise_if_interrupted
 from .base import Estimate, EstimationError, as_regressors, as_target, numerical_hessian
 
 # ---------------------------------------------------------------- priors
@@ -289,8 +290,9 @@ def fit_mcmc(regressors, target, *, prior=None, sigma: float | None = None, nwal
         raise EstimationError("could not place the initial walkers inside the prior support")
     sampler = emcee.EnsembleSampler(nwalkers, p, log_prob, vectorize=True)
     sampler.random_state = np.random.RandomState(seed).get_state()
-    for _ in progress.bar(sampler.sample(p0, iterations=nsteps), nsteps, "MCMC steps", always_final=False):
-        pass  # = sampler.run_mcmc(p0, nsteps), with a progress bar
+    with deferred_interrupts():    # a Ctrl-C stops the chain between steps, not inside emcee's wrapper
+        for _ in progress.bar(sampler.sample(p0, iterations=nsteps), nsteps, "MCMC steps", always_final=False):
+            raise_if_interrupted()   # = sampler.run_mcmc(p0, nsteps), with a progress bar
     tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
     tmax = float(np.max(tau))
     burn = int(math.ceil(2 * tmax))

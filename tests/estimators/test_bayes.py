@@ -105,3 +105,31 @@ def test_improper_prior_raises(prior, text):
         with pytest.raises(EstimationError, match="improper prior") as err:
             fn(phi, np.arange(4.0), prior=prior, sigma=1.0)
         assert text in str(err.value)
+
+
+def test_ctrl_c_during_mcmc_stops_between_steps_without_a_traceback(capsys):
+    """An auditor's Ctrl-C during the structure stage's MCMC: the KeyboardInterrupt was raised inside
+    emcee's likelihood wrapper, which printed its traceback before the CLI's "interrupted" line. Under
+    the CLI's SIGINT handler the sampling loop now only marks the process and raises between steps."""
+    import signal
+
+    from pipeline import runfolder as rf
+    from pipeline.cli import _remember_interrupts
+    prev = _remember_interrupts(rf)
+    fired = []
+
+    def log_density(t):
+        if rf.DEFERRING.is_set() and not fired:         # inside the chain: Ctrl-C arrives
+            fired.append(True)
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+        return -0.5 * (t[0] - 0.5) ** 2
+
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            bayes.fit_mcmc(U, W, prior=bayes.CallablePrior(log_density), sigma=0.5, nwalkers=8, nsteps=500)
+        out = capsys.readouterr()
+        assert fired and rf.INTERRUPTED.is_set() and not rf.DEFERRING.is_set()
+        assert "Traceback" not in out.err + out.out and "emcee" not in out.err + out.out
+    finally:
+        signal.signal(signal.SIGINT, prev)
+        rf.INTERRUPTED.clear()

@@ -75,3 +75,14 @@ def test_silent_under_pytest_by_default(capsys, monkeypatch):
     with progress.stage("quiet"):
         pass
     assert capsys.readouterr().err == ""
+
+
+def test_a_stage_stopped_by_ctrl_c_says_interrupted_not_failed(out):
+    with pytest.raises(KeyboardInterrupt):
+        with progress.stage("structures"):
+            raise KeyboardInterrupt
+    with pytest.raises(ValueError):
+        with progress.stage("fit"):
+            raise ValueError
+    lines = out.getvalue().splitlines()
+    assert lines[1].startswith("[structures] ... interrupted (") and lines[3].startswith("[fit] ... failed (")
