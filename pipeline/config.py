@@ -203,6 +203,12 @@ class DiagnoseCfg(_Strict):
 ESTIMATOR_IDS = ("ls", "wls", "iv", "ml", "map", "mcmc", "rls")
 
 
+# decimation keeps every q-th sample of the record: the time axis and every signal together (pipeline.data.
+# apply_prefilters), so a signals list on it was ignored (found by an independent audit) and is refused
+DECIMATE_SIGNALS = ("decimate changes the sample time of the whole record, so it applies to every input and "
+                    "output together; expected no signals on a decimate step (remove the key)")
+
+
 class PrefilterStepCfg(_Strict):
     """One prefilter step (pipeline.prefilter): name, parameters, and the signals it applies to."""
 
@@ -339,7 +345,7 @@ class LoadedConfig:
         p = Path(self.cfg.data.path)
         return p if p.is_absolute() else (self.path.parent / p)
 
-    def canonical(self) -> dict:
+    def _hashed(self) -> dict:
         d = self.cfg.model_dump(mode="json")
         for key, default in (("uncertainty", "gauss"), ("units", {})):  # report-only keys at their
             if d.get(key) == default:                                   # defaults keep run ids stable
@@ -348,8 +354,20 @@ class LoadedConfig:
             d["model"].pop("bounds", None)
         return d
 
+    def canonical(self) -> dict:
+        """The validated config as written back (config.resolved.yaml, extended.yaml, the report): without
+        the default split.validation_fraction when split ranges or separate records decide the split, where
+        a written fraction is an error (it would be ignored), so the file loads again."""
+        d = self._hashed()
+        c = self.cfg
+        if "validation_fraction" not in c.split.model_fields_set and (
+                c.split.estimation is not None or c.data.validation is not None or c.data.experiments is not None):
+            d["split"].pop("validation_fraction", None)
+        return d
+
     def sha256(self) -> str:
-        blob = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":")).encode()
+        # of the full dump (the default fraction included): run ids of existing configs are unchanged
+        blob = json.dumps(self._hashed(), sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()
 
 
@@ -529,6 +547,21 @@ def _check_name(n: str, kind: str, f: str) -> None:
         raise ConfigError(f"name of {len(n)} characters; at most 64", file=f, key=kind)
 
 
+def _fmt_range(rng) -> str:
+    return f"[{rng[0]}, {'null' if rng[1] is None else rng[1]}]"
+
+
+def _check_input_output_columns(imap: dict[str, str], omap: dict[str, str], ikey: str, okey: str, f: str) -> None:
+    """A data column is an input (fed to the simulation) or a measured output (compared with it), never
+    both: the model would be driven by the very signal it is scored on (found by an independent audit)."""
+    col = next((c for c in imap if c in omap), None)
+    if col is not None:
+        raise ConfigError(f"column {col!r} is both an input ({ikey}: {col} -> {imap[col]}) and a measured output "
+                          f"({okey}: {col} -> {omap[col]}); expected each data column in one of {ikey} and "
+                          f"{okey} only: an input drives the simulation and an output is compared with it",
+                          file=f, key=ikey)
+
+
 def _check(cfg: Config, path: Path) -> LoadedConfig:
     f = str(path)
     m = cfg.model
@@ -598,6 +631,16 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
         raise ConfigError(f"model input {missing_in[0]!r} has no data column", file=f, key="data.inputs")
     if not omap:
         raise ConfigError("at least one measured output is needed", file=f, key="data.outputs")
+    _check_input_output_columns(imap, omap, "data.inputs", "data.outputs", f)
+    records = [("data.validation", cfg.data.validation)] if cfg.data.validation is not None else []
+    records += [(f"data.experiments[{i}]", e) for i, e in enumerate(cfg.data.experiments or [])]
+    for key, exp in records:
+        # keys a record leaves out are data's (pipeline.data.sources): check the pair it reads
+        if exp.inputs is None and exp.outputs is None:
+            continue
+        rins, ikey = (exp.inputs, f"{key}.inputs") if exp.inputs is not None else (cfg.data.inputs, "data.inputs")
+        routs, okey = (exp.outputs, f"{key}.outputs") if exp.outputs is not None else (cfg.data.outputs, "data.outputs")
+        _check_input_output_columns(_as_map(rins), _as_map(routs), ikey, okey, f)
     for col, name in omap.items():
         if name not in m.states and name not in m.outputs:
             raise ConfigError(f"measured column {col!r} maps to {name!r}, which is neither a state nor a "
@@ -616,6 +659,13 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     if (s.estimation is None) != (s.validation is None):
         raise ConfigError("give both split.estimation and split.validation, or neither",
                           file=f, key="split")
+    if s.estimation is not None and "validation_fraction" in s.model_fields_set:
+        # the ranges decide the split and the fraction was silently ignored (found by an independent audit); only
+        # a fraction the user wrote is refused, not the default every config carries
+        raise ConfigError(f"{s.validation_fraction:g} given beside the explicit ranges split.estimation "
+                          f"{_fmt_range(s.estimation)} and split.validation {_fmt_range(s.validation)}, which decide "
+                          "the split (the fraction would be ignored); expected either the ranges or "
+                          "validation_fraction, not both", file=f, key="split.validation_fraction")
     if s.warmup is not None:
         init = m.initial if isinstance(m.initial, dict) else {st: m.initial for st in m.states}
         if any(v == "estimate" for v in init.values()):
@@ -654,6 +704,8 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
                 parse(term, allowed - set(m.params), where=f"structures.candidates.{name}[{i}]", file=f)
     signals = set(imap.values()) | set(omap.values())
     for i, step in enumerate(cfg.prefilter):
+        if step.name == "decimate" and step.signals is not None:
+            raise ConfigError(DECIMATE_SIGNALS, file=f, key=f"prefilter[{i}].signals")
         for sig in step.signals or []:
             if sig not in signals:
                 raise ConfigError(f"{sig!r} is not a measured signal (known: {sorted(signals)})",

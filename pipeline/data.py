@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import LoadedConfig
+from .config import DECIMATE_SIGNALS, LoadedConfig
 from .errors import ConfigError, DataError
 from .hashing import file_sha256  # noqa: F401 - imported from here by runs, assignment
 from .loaders import ReadSpec, read_columns
@@ -434,7 +434,8 @@ def _check_prefilter_step(st, key: str, file: str) -> None:
 
 def apply_prefilters(rec: Record, steps, file: str, min_samples: int | None = None) -> list[dict]:
     """Apply the config's prefilter steps (pipeline.prefilter) in order; returns the log entries.
-    ``decimate`` acts on every signal and on the time axis; other steps on ``signals`` (default all).
+    ``decimate`` acts on every signal and on the time axis (a ``signals`` list on it is an error); other
+    steps on ``signals`` (default all).
     Each step runs on every segment separately (a segment boundary is a break between experiments, so a
     filter must not carry one record's state into the next). After a ``decimate`` every segment must
     still hold ``min_samples`` samples (data.min_samples)."""
@@ -444,9 +445,9 @@ def apply_prefilters(rec: Record, steps, file: str, min_samples: int | None = No
     for i, st in enumerate(steps):
         key = f"prefilter[{i}]"
         _check_prefilter_step(st, key, file)
+        if st.name == "decimate" and st.signals is not None:   # load_config refuses it too; it was ignored
+            raise ConfigError(DECIMATE_SIGNALS, file=file, key=f"{key}.signals")
         names = st.signals or list(rec.inputs) + list(rec.outputs)
-        if st.name == "decimate":
-            names = list(rec.inputs) + list(rec.outputs)
         step = Prefilter(st.name, dict(st.params))
         multi = len(rec.segments) > 1
         warns, info = [], {}

@@ -90,6 +90,29 @@ CONFIG_CASES = {
                           "degree": 1000000}}}), "structures.library.poly.degree"),
     "poly_unknown_key": (("structures", {"equation": "v", "known": "u", "library": {"poly": {"vars": ["x"],
                           "bogus": 1}}}), "structures.library.poly.bogus: unknown key"),
+    # accepted with exit 0 and the fraction silently ignored (an audit, 2026-12-07: D4)
+    "split_ranges_and_fraction": (("split", {"estimation": [0, 300], "validation": [300, None],
+                                             "validation_fraction": 0.3}),
+                                  "error: {cfg}: split.validation_fraction: 0.3 given beside the explicit ranges "
+                                  "split.estimation [0, 300] and split.validation [300, null], which decide the "
+                                  "split (the fraction would be ignored); expected either the ranges or "
+                                  "validation_fraction, not both"),
+    # one column fed as the input and scored as the output: a nonsense run with exit 0 (an audit: D8)
+    "same_column_input_and_output": (("data.inputs", {"x": "u"}),
+                                     "error: {cfg}: data.inputs: column 'x' is both an input (data.inputs: x -> u) "
+                                     "and a measured output (data.outputs: x -> x)"),
+    "same_column_in_the_validation_record": (("data.validation", {"path": "rec.csv", "inputs": {"x": "u"}}),
+                                             "error: {cfg}: data.validation.inputs: column 'x' is both an input "
+                                             "(data.validation.inputs: x -> u) and a measured output "
+                                             "(data.outputs: x -> x)"),
+    "same_column_in_an_experiment": (("data.experiments", [{"role": "estimation"},
+                                                           {"role": "validation", "outputs": {"u": "x"}}]),
+                                     "error: {cfg}: data.inputs: column 'u' is both an input (data.inputs: u -> u) "
+                                     "and a measured output (data.experiments[1].outputs: u -> x)"),
+    # signals: [x] on a decimate step was ignored: u was decimated too, without a word (an audit: D9)
+    "decimate_with_signals": (("prefilter", [{"name": "decimate", "params": {"q": 2}, "signals": ["x"]}]),
+                              "error: {cfg}: prefilter[0].signals: decimate changes the sample time of the whole "
+                              "record, so it applies to every input and output together; expected no signals"),
 }
 
 
@@ -292,3 +315,55 @@ def test_numbers_with_an_exponent_are_numbers(tmp_path):
     (tmp_path / "c.yaml").write_text(text)
     p = load_config(tmp_path / "c.yaml").cfg.model.params
     assert (p["k"], p["c"], p["m"]) == (4.0, 0.6, 1.0)
+
+
+def test_a_fraction_left_at_its_default_is_not_refused_beside_ranges(tmp_path):
+    """Only a validation_fraction the user wrote conflicts with split ranges or separate records: the
+    default every config carries does not, and the config as extended.yaml writes it back
+    (LoadedConfig.canonical without structures and estimators, pipeline.extended) loads and splits again,
+    with the same run-id hash."""
+    from pipeline.config import load_config
+    from pipeline.data import load_record, make_split
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    other = _record()
+    other["x"] = other["x"] + 1.0
+    other.to_csv(tmp_path / "val.csv", index=False)
+    for key, value in (("split", {"estimation": [0, 300], "validation": [300, None]}),
+                       ("data.validation", {"path": "val.csv"})):
+        cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+        _set(cfg, key, value)
+        (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+        lc = load_config(tmp_path / "c.yaml")
+        assert "validation_fraction" not in lc.canonical()["split"]
+        back = {k: v for k, v in lc.canonical().items() if k not in ("structures", "estimators")}
+        (tmp_path / "again.yaml").write_text(yaml.safe_dump(back))
+        again = load_config(tmp_path / "again.yaml")
+        assert again.sha256() == lc.sha256()
+        assert make_split(again, load_record(again)) == make_split(lc, load_record(lc))
+
+
+def test_shipped_configs_still_load():
+    from pathlib import Path
+
+    from pipeline.config import load_config
+    root = Path(__file__).resolve().parents[1] / "configs"
+    paths = sorted(root.glob("*.yaml"))
+    assert len(paths) >= 5
+    for p in paths:
+        load_config(p)
+
+
+def test_apply_prefilters_refuses_signals_on_decimate(tmp_path):
+    """The same refusal for a caller that builds the steps itself (no load_config): it used to decimate
+    every signal whatever ``signals`` said."""
+    from pipeline.config import PrefilterStepCfg, load_config
+    from pipeline.data import apply_prefilters, load_record
+    from pipeline.errors import ConfigError
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(GOOD))
+    rec = load_record(load_config(tmp_path / "c.yaml"))
+    n = rec.n
+    with pytest.raises(ConfigError) as e:
+        apply_prefilters(rec, [PrefilterStepCfg(name="decimate", params={"q": 2}, signals=["x"])], "c.yaml")
+    assert str(e.value).startswith("c.yaml: prefilter[0].signals: decimate changes the sample time")
+    assert rec.n == n

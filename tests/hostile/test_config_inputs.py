@@ -133,6 +133,15 @@ CASES = [
     ("bound-one-number", [("model.bounds", {"c": 0})], ["model.bounds.c"]),
     ("bound-three-numbers", [("model.bounds", {"c": [0, 1, 2]})], ["model.bounds.c"]),
     ("bound-inf", [("model.bounds", {"c": [0, ".inf"]})], ["model.bounds.c"]),
+    # accepted with exit 0 and ignored or nonsense (an audit, 2026-12-07: D4, D8, D9)
+    ("split-ranges-and-fraction", [("split", {"estimation": [0, 200], "validation": [200, None],
+                                              "validation_fraction": 0.3})],
+     ["split.validation_fraction", "explicit ranges split.estimation [0, 200] and split.validation [200, null]",
+      "either the ranges or validation_fraction"]),
+    ("same-column-input-and-output", [("data.inputs", {"x": "u"})],
+     ["data.inputs", "column 'x'", "data.outputs: x -> x"]),
+    ("decimate-signals", [("prefilter", [{"name": "decimate", "params": {"q": 2}, "signals": ["x"]}])],
+     ["prefilter[0].signals", "applies to every input and output"]),
 ]
 
 

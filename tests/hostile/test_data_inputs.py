@@ -163,7 +163,8 @@ def c_table_without_columns(d):
 
 def c_table_column_count(d):
     np.savetxt(d / "rec.dat", _frame().to_numpy())
-    return ({"path": "rec.dat", "format": "table", "columns": ["t", "u"], "inputs": ["u"], "outputs": {"u": "x"}},
+    # two names for three fields (one column as input and output is refused first: load_config)
+    return ({"path": "rec.dat", "format": "table", "columns": ["u", "x"], "time": None, "sample_time": 0.02},
             {}, ["{dir}/rec.dat", "data.columns names 2 columns", "holds 3 fields"])
 
 
