@@ -357,12 +357,15 @@ class LoadedConfig:
     def canonical(self) -> dict:
         """The validated config as written back (config.resolved.yaml, extended.yaml, the report): without
         the default split.validation_fraction when split ranges or separate records decide the split, where
-        a written fraction is an error (it would be ignored), so the file loads again."""
+        a written fraction is an error (it would be ignored), and without the default ``estimators`` when
+        there is no structures section (written, they are an error), so the file loads again."""
         d = self._hashed()
         c = self.cfg
         if "validation_fraction" not in c.split.model_fields_set and (
                 c.split.estimation is not None or c.data.validation is not None or c.data.experiments is not None):
             d["split"].pop("validation_fraction", None)
+        if "estimators" not in c.model_fields_set and c.structures is None:
+            d.pop("estimators", None)   # the default, refused without a structures section when written
         return d
 
     def sha256(self) -> str:

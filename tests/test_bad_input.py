@@ -342,6 +342,25 @@ def test_a_fraction_left_at_its_default_is_not_refused_beside_ranges(tmp_path):
         assert make_split(again, load_record(again)) == make_split(lc, load_record(lc))
 
 
+def test_the_resolved_config_of_every_shipped_config_loads_again_with_the_same_run_id(tmp_path):
+    """config.resolved.yaml (LoadedConfig.canonical) put back beside the config it came from loads again
+    and gives the same run id: the default estimators of a config without a structures section were
+    written out and then refused ('estimators: ... add a structures section or remove estimators'), and
+    the default validation_fraction beside split ranges or separate records would now be refused too."""
+    from pathlib import Path
+
+    from pipeline.config import load_config
+    root = Path(__file__).resolve().parents[1] / "configs"
+    for path in sorted(root.glob("*.yaml")):
+        lc = load_config(path)
+        back = path.parent / f".resolved-{path.stem}-{tmp_path.name}.yml"   # not matched by *.yaml
+        try:
+            back.write_text(yaml.safe_dump(lc.canonical(), sort_keys=False))
+            assert load_config(back).sha256() == lc.sha256(), path.name
+        finally:
+            back.unlink(missing_ok=True)
+
+
 def test_shipped_configs_still_load():
     from pathlib import Path
 
