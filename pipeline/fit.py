@@ -283,11 +283,11 @@ def simulate_full(model: Model, prob: Problem, x0: np.ndarray, partial: bool = F
             res = simulate_states(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
                                   bound=prob.bound, prefiltered=True)
             if res.diverged_at is not None:
+                hint = (f"(parameters {model.params}); a parameter's physical range can be given in model.bounds "
+                        "(e.g. {a: [0, null]})")
                 _raise_if_undefined(model, prob.t[s0:s1], prob.inputs(model)[s0:s1], segment_x0(model, prob, s0, x0),
-                                    res, "the fitted model fails on this record", f"(parameters {model.params})")
-                raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} "
-                                      f"(parameters {model.params}); a parameter's physical range can be "
-                                      "given in model.bounds (e.g. {a: [0, null]})")
+                                    res, "the fitted model fails on this record", hint)
+                raise SimulationError(f"the fitted model fails on this record: {res.reason(prob.t[s0:s1])} {hint}")
     return Yh
 
 

@@ -705,13 +705,47 @@ def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarra
         except (ArithmeticError, ValueError, TypeError, KeyError):
             return None
     bad = [i for i in range(nx) if not np.isfinite(f[i])]
+    where = ""
+    if not bad and k > 0:
+        # finite at the sample: the NaN arose at an RK4 stage inside the step (√x of a level the stage's
+        # Euler predictor took below 0 while the samples stay above; an auditor's ``k*sqrt(x)`` got "model:")
+        row, f, bad, tj = _stage_undefined(replace(model, terms=()), row[:nx], U[j:j + 1],
+                                           float(np.asarray(t, float)[j]), float(np.asarray(t, float)[k] - t[j]))
+        where = " at an RK4 stage of the step to that sample"
     if not bad:
         return None
     s, v = model.states[bad[0]], f[bad[0]]
     at = ", ".join([f"{n} = {x:.6g}" for n, x in zip(model.states[:nx], row[:nx])] +
                    [f"{n} = {U[j, i]:.6g}" for i, n in enumerate(model.inputs) if i < U.shape[1]])
-    return s, (f"{s}' = {model.equations[s].text} is {v} at t = {float(tj[0]):.6g} s ({at}); "
+    return s, (f"{s}' = {model.equations[s].text} is {v}{where} at t = {float(tj[0]):.6g} s ({at}); "
                "check this equation and the parameter values")
+
+
+def _stage_undefined(model: Model, x: np.ndarray, u: np.ndarray, t0: float, dt: float):
+    """(state row, right-hand side, indices not finite, [t]) at the first RK4 stage of the steps from
+    ``x`` over ``dt`` (``model.substeps`` of them, the input held at ``u``) whose right-hand side is not
+    finite; ``bad`` empty when every stage is finite. Only for the words of :func:`undefined_equation`."""
+    from .model import rhs_vectorized
+    n = max(1, int(model.substeps))
+    h = dt / n
+    nx = len(x)
+    with np.errstate(all="ignore"):
+        for i in range(n):
+            t = t0 + i * h
+            ks, stage = [], (x, t)
+            for c, w in ((0.0, None), (0.5, 0), (0.5, 1), (1.0, 2)):
+                xs = x if w is None else x + c * h * ks[w]
+                stage = (xs, t + c * h)
+                try:
+                    fs = rhs_vectorized(model, xs[None, :], u, np.array([t + c * h]))[0][:nx]
+                except (ArithmeticError, ValueError, TypeError, KeyError):
+                    return x, np.zeros(nx), [], np.array([t])
+                bad = [j for j in range(nx) if not np.isfinite(fs[j])]
+                if bad:
+                    return stage[0], fs, bad, np.array([stage[1]])
+                ks.append(fs)
+            x = x + h / 6 * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+    return x, np.zeros(nx), [], np.array([t0])
 
 
 _PROGRAMS: dict = {}

@@ -269,6 +269,22 @@ def test_an_equation_undefined_at_the_start_is_named(tmp_path, capsys, equation,
     assert f"v' = {equation} is {value} at t = 0 s (x = 0, v = 0, u = " in err, err
 
 
+def test_an_equation_undefined_inside_a_step_is_named_with_the_stage_state(tmp_path, capsys):
+    """An auditor's ``k*sqrt(x)``: every sample's state is defined, but an RK4 stage of one step takes x
+    below 0, and the error named only ``model``. The key is the equation's, and the message gives the
+    stage's state, where x < 0."""
+    import re
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    cfg["model"]["equations"]["v"] = "(u - c*v - k*sqrt(x))/m"
+    _record().to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    _expect_exit2(tmp_path, capsys, f"{tmp_path / 'c.yaml'}: model.equations.v: the model diverges")
+    code = main(["report", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "runs" / "r2")])
+    err = capsys.readouterr().err
+    assert code == 2 and "v' = (u - c*v - k*sqrt(x))/m is nan at an RK4 stage of the step to that sample" in err
+    assert float(re.search(r"\(x = (-?[0-9.e+-]+),", err).group(1)) < 0
+
+
 def test_a_copy_of_the_estimation_record_is_no_validation_record(tmp_path, capsys):
     """The same samples under another file name (a copy) are refused as the same file is: the check is on
     the samples read, so the validation numbers cannot be in-sample by renaming. A different record runs,
