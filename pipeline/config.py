@@ -658,6 +658,17 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
                               f"{', '.join(sorted(named))}", file=f, key=f"units.{sig}")
     if cfg.data.time is not None and cfg.data.sample_time is not None:
         raise ConfigError("give data.time or data.sample_time, not both", file=f, key="data")
+    for key, exp in [("data", cfg.data)] + records:
+        # the time column is the time axis: as an input or an output too it would drive or score the model
+        own = key == "data" or exp.time is not None or exp.sample_time is not None
+        tcol, tkey = (exp.time, f"{key}.time") if own else (cfg.data.time, "data.time")
+        for side in ("inputs", "outputs"):
+            cols = getattr(exp, side)
+            skey = f"{key}.{side}" if cols is not None else f"data.{side}"
+            if tcol is not None and tcol in _as_map(cols if cols is not None else getattr(cfg.data, side)):
+                raise ConfigError(f"column {tcol!r} is the time axis ({tkey}) and also "
+                                  f"{'an input' if side == 'inputs' else 'a measured output'} ({skey}); expected the "
+                                  "time column apart from the inputs and outputs", file=f, key=tkey)
     s = cfg.split
     if (s.estimation is None) != (s.validation is None):
         raise ConfigError("give both split.estimation and split.validation, or neither",

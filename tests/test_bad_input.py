@@ -109,6 +109,14 @@ CONFIG_CASES = {
                                                            {"role": "validation", "outputs": {"u": "x"}}]),
                                      "error: {cfg}: data.inputs: column 'u' is both an input (data.inputs: u -> u) "
                                      "and a measured output (data.experiments[1].outputs: u -> x)"),
+    # the time column mapped as an input too: the time axis would drive the model (noticed by the audit)
+    "time_column_as_input": (("data.inputs", {"t": "u"}),
+                             "error: {cfg}: data.time: column 't' is the time axis (data.time) and also an input "
+                             "(data.inputs)"),
+    "time_column_as_an_experiments_output": (("data.experiments", [{"role": "estimation"},
+                                                                   {"role": "validation", "outputs": {"t": "x"}}]),
+                                             "error: {cfg}: data.time: column 't' is the time axis (data.time) "
+                                             "and also a measured output (data.experiments[1].outputs)"),
     # signals: [x] on a decimate step was ignored: u was decimated too, without a word (an audit: D9)
     "decimate_with_signals": (("prefilter", [{"name": "decimate", "params": {"q": 2}, "signals": ["x"]}]),
                               "error: {cfg}: prefilter[0].signals: decimate changes the sample time of the whole "
