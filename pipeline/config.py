@@ -720,6 +720,10 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
     for i, step in enumerate(cfg.prefilter):
         if step.name == "decimate" and step.signals is not None:
             raise ConfigError(DECIMATE_SIGNALS, file=f, key=f"prefilter[{i}].signals")
+        if step.signals is not None and not step.signals:
+            # read as "every signal" (the default) until now: an empty list more likely means a list left unfinished
+            raise ConfigError("an empty list; expected the signals the step applies to, or no signals key for "
+                              "every signal", file=f, key=f"prefilter[{i}].signals")
         for sig in step.signals or []:
             if sig not in signals:
                 raise ConfigError(f"{sig!r} is not a measured signal (known: {sorted(signals)})",

@@ -117,6 +117,9 @@ CONFIG_CASES = {
                                                                    {"role": "validation", "outputs": {"t": "x"}}]),
                                              "error: {cfg}: data.time: column 't' is the time axis (data.time) "
                                              "and also a measured output (data.experiments[1].outputs)"),
+    # signals: [] was read as every signal, without a word (noticed by the audit)
+    "empty_signals": (("prefilter", [{"name": "remove_mean", "signals": []}]),
+                      "error: {cfg}: prefilter[0].signals: an empty list; expected the signals the step applies to"),
     # signals: [x] on a decimate step was ignored: u was decimated too, without a word (an audit: D9)
     "decimate_with_signals": (("prefilter", [{"name": "decimate", "params": {"q": 2}, "signals": ["x"]}]),
                               "error: {cfg}: prefilter[0].signals: decimate changes the sample time of the whole "
