@@ -118,12 +118,13 @@ def gain_ci(before: np.ndarray, after: np.ndarray, rng: np.random.Generator | No
     t = float(sps.t.ppf(0.975, dof))
     lo, hi = L - t * se, L + t * se
     extra = {"p_not_lower": p_not_lower(L, se, dof)} if one_sided else {}
-    # the lower end is clipped at an RMSE ratio of 100 (relative gain −99), or 100 times below the point
-    # when the point is already beyond it: such a bound says that this record cannot bound the gain from
-    # below (the residuals are too smooth: few degrees of freedom; :func:`is_unbounded`). The upper end
-    # needs no clip (1 − e^(−hi) < 1 for any hi): clipped at ln 100 too, an after-model 186 times better
-    # had its interval's upper end at its own point (0.99421 to 0.99461), with no note
+    # each end is clipped at an RMSE ratio of 100 (relative gain −99 or 0.99), or 100 times beyond the point
+    # when the point is already past it: such a bound says that this record cannot bound the gain on that
+    # side (the residuals are too smooth: few degrees of freedom; :func:`is_unbounded`), and the upper end
+    # stays below 1. Clipped at ln 100 whatever the point, an after-model 186 times better had its
+    # interval's upper end at its own point (0.99421 to 0.99461), with no note
     lo = max(lo, -L_CLIP if L > -L_CLIP else L - L_CLIP)
+    hi = min(hi, L_CLIP if L < L_CLIP else L + L_CLIP)
     ci = [float(min(-math.expm1(-lo), rel)), float(max(-math.expm1(-hi), rel))]
     return {"metric": "validation_rmse_sim", "before": rb, "after": ra, "relative": rel, "ci95": ci,
             "ci95_meaning": CI_MEANING, **compared, **extra,
