@@ -634,16 +634,22 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
         raise ConfigError(f"model input {missing_in[0]!r} has no data column", file=f, key="data.inputs")
     if not omap:
         raise ConfigError("at least one measured output is needed", file=f, key="data.outputs")
-    _check_input_output_columns(imap, omap, "data.inputs", "data.outputs", f)
     records = [("data.validation", cfg.data.validation)] if cfg.data.validation is not None else []
     records += [(f"data.experiments[{i}]", e) for i, e in enumerate(cfg.data.experiments or [])]
-    for key, exp in records:
-        # keys a record leaves out are data's (pipeline.data.sources): check the pair it reads
-        if exp.inputs is None and exp.outputs is None:
-            continue
-        rins, ikey = (exp.inputs, f"{key}.inputs") if exp.inputs is not None else (cfg.data.inputs, "data.inputs")
-        routs, okey = (exp.outputs, f"{key}.outputs") if exp.outputs is not None else (cfg.data.outputs, "data.outputs")
+    for key, exp in [("data", cfg.data)] + records:
+        # the columns each record reads (keys it leaves out are data's: pipeline.data.sources), and its time
+        # column: an input or an output, never both, and the time axis neither
+        cols = {side: (getattr(exp, side), f"{key}.{side}") if getattr(exp, side) is not None
+                else (getattr(cfg.data, side), f"data.{side}") for side in ("inputs", "outputs")}
+        (rins, ikey), (routs, okey) = cols["inputs"], cols["outputs"]
         _check_input_output_columns(_as_map(rins), _as_map(routs), ikey, okey, f)
+        own = key == "data" or exp.time is not None or exp.sample_time is not None
+        tcol, tkey = (exp.time, f"{key}.time") if own else (cfg.data.time, "data.time")
+        for side, (names, skey) in cols.items():
+            if tcol is not None and tcol in _as_map(names):
+                raise ConfigError(f"column {tcol!r} is the time axis ({tkey}) and also "
+                                  f"{'an input' if side == 'inputs' else 'a measured output'} ({skey}); expected the "
+                                  "time column apart from the inputs and outputs", file=f, key=tkey)
     for col, name in omap.items():
         if name not in m.states and name not in m.outputs:
             raise ConfigError(f"measured column {col!r} maps to {name!r}, which is neither a state nor a "
@@ -658,17 +664,6 @@ def _check(cfg: Config, path: Path) -> LoadedConfig:
                               f"{', '.join(sorted(named))}", file=f, key=f"units.{sig}")
     if cfg.data.time is not None and cfg.data.sample_time is not None:
         raise ConfigError("give data.time or data.sample_time, not both", file=f, key="data")
-    for key, exp in [("data", cfg.data)] + records:
-        # the time column is the time axis: as an input or an output too it would drive or score the model
-        own = key == "data" or exp.time is not None or exp.sample_time is not None
-        tcol, tkey = (exp.time, f"{key}.time") if own else (cfg.data.time, "data.time")
-        for side in ("inputs", "outputs"):
-            cols = getattr(exp, side)
-            skey = f"{key}.{side}" if cols is not None else f"data.{side}"
-            if tcol is not None and tcol in _as_map(cols if cols is not None else getattr(cfg.data, side)):
-                raise ConfigError(f"column {tcol!r} is the time axis ({tkey}) and also "
-                                  f"{'an input' if side == 'inputs' else 'a measured output'} ({skey}); expected the "
-                                  "time column apart from the inputs and outputs", file=f, key=tkey)
     s = cfg.split
     if (s.estimation is None) != (s.validation is None):
         raise ConfigError("give both split.estimation and split.validation, or neither",

@@ -701,7 +701,8 @@ def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarra
     tj = np.asarray(t, float)[j:j + 1]
     with np.errstate(all="ignore"):
         try:       # the config's own equations: an extension's terms aside
-            f = rhs_vectorized(replace(model, terms=()), row[None, :nx], U[j:j + 1], tj)[0]
+            base = replace(model, terms=())
+            f = rhs_vectorized(base, row[None, :nx], U[j:j + 1], tj)[0]
         except (ArithmeticError, ValueError, TypeError, KeyError):
             return None
     bad = [i for i in range(nx) if not np.isfinite(f[i])]
@@ -709,8 +710,7 @@ def undefined_equation(model: Model, t: np.ndarray, U: np.ndarray, x0: np.ndarra
     if not bad and k > 0:
         # finite at the sample: the NaN arose at an RK4 stage inside the step (√x of a level the stage's
         # Euler predictor took below 0 while the samples stay above; an auditor's ``k*sqrt(x)`` got "model:")
-        row, f, bad, tj = _stage_undefined(replace(model, terms=()), row[:nx], U[j:j + 1],
-                                           float(np.asarray(t, float)[j]), float(np.asarray(t, float)[k] - t[j]))
+        row, f, bad, tj = _stage_undefined(base, row[:nx], U[j:j + 1], float(tj[0]), float(np.asarray(t, float)[k] - tj[0]))
         where = " at an RK4 stage of the step to that sample"
     if not bad:
         return None
@@ -731,18 +731,16 @@ def _stage_undefined(model: Model, x: np.ndarray, u: np.ndarray, t0: float, dt: 
     nx = len(x)
     with np.errstate(all="ignore"):
         for i in range(n):
-            t = t0 + i * h
-            ks, stage = [], (x, t)
-            for c, w in ((0.0, None), (0.5, 0), (0.5, 1), (1.0, 2)):
-                xs = x if w is None else x + c * h * ks[w]
-                stage = (xs, t + c * h)
+            ks = []
+            for c, w in ((0.0, None), (0.5, 0), (0.5, 1), (1.0, 2)):     # the classical RK4 tableau
+                xs, ts = (x if w is None else x + c * h * ks[w]), np.array([t0 + (i + c) * h])
                 try:
-                    fs = rhs_vectorized(model, xs[None, :], u, np.array([t + c * h]))[0][:nx]
+                    fs = rhs_vectorized(model, xs[None, :], u, ts)[0][:nx]
                 except (ArithmeticError, ValueError, TypeError, KeyError):
-                    return x, np.zeros(nx), [], np.array([t])
+                    return x, np.zeros(nx), [], ts
                 bad = [j for j in range(nx) if not np.isfinite(fs[j])]
                 if bad:
-                    return stage[0], fs, bad, np.array([stage[1]])
+                    return xs, fs, bad, ts
                 ks.append(fs)
             x = x + h / 6 * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
     return x, np.zeros(nx), [], np.array([t0])

@@ -173,7 +173,8 @@ def render_report(ctx) -> str:
              *map(float, np.percentile(post.samples[:, i], [2.5, 97.5])))
             for i, n in enumerate(post.names)],
         post=post, nominal_eqs=ctx.model.describe_equations(), final_eqs=diag.final.model.describe_equations(),
-        log=ctx.rec.log, structure_rows=view.model_rows(s), equation_error_note=view.equation_error_note(s), prov=_provenance(ctx), zoom=ZOOM,
+        log=ctx.rec.log, structure_rows=view.model_rows(s), equation_error_note=view.equation_error_note(s),
+        prov=_provenance(ctx), zoom=ZOOM,
         n_val=int(ctx.prob.split.val[1] - ctx.prob.split.val[0]), n_models=len(diag.fits),
         nominal_unc=_unc_law(diag.nominal), final_unc=_unc_law(diag.final), n_out=len(ctx.prob.out_names),
         n_pairs=len(ctx.prob.out_names) * len(excited_inputs(ctx.prob)),

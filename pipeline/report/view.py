@@ -15,6 +15,7 @@ import math
 import re
 from typing import Any
 
+from ..diagnostics.adequacy import is_informational
 from ..diagnostics.coverage import coverage_text
 
 _LONG_FLOAT = re.compile(r"(?<![\w.])-?\d+\.\d{5,}(?:[eE][-+]?\d+)?")
@@ -251,8 +252,9 @@ def first_screen(s: dict) -> dict:
     elif nf is not None and nf < 0:
         warnings.append(f"The nominal model is unusable on validation data (fit {sig(nf, 3)} %, worse than the "
                         "output's mean); only the extended model should be used.")
-    flagged = [t for t in diag.get("tests") or [] if (t.get("informational") or str(t.get("name", "")).startswith(
-        "feedback_crosscorrelation")) and t.get("tested", True) and not t.get("passed")]
+    # by name too: a summary written before the ``informational`` key
+    flagged = [t for t in diag.get("tests") or [] if (t.get("informational") or is_informational(str(t.get("name", ""))))
+               and t.get("tested", True) and not t.get("passed")]
     if flagged:
         # a row about the data, not the model: said beside the verdict so that the failed row in the tests
         # table does not read as a failed adequacy test
